@@ -1,0 +1,184 @@
+"""flexmb — flexible digital twin of actuated spatial mechanisms (positional FEM).
+
+Verbs:
+  flexmb check SCENE                      validate a scene and print the model summary
+  flexmb run SCENE --until T [--dt DT] [--json OUT]
+                                          offline simulation; JSON summary of speed, solver
+                                          health and the final values of the scene's outputs
+  flexmb commands stewart --out CSV       the Stewart appendix leg-length commands (Eqs. 52–60)
+
+Exit codes: 0 success, 1 bad input (scene, flags), 2 a step did not converge.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+from .errors import ConvergenceError, FlexmbError, SceneError
+
+
+def _env_defaults() -> None:
+    # Keep BLAS single-threaded (two threads on two cores slow small solves down) and give numba
+    # a writable cache even when the package is installed read-only.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("NUMBA_CACHE_DIR", str(Path.home() / ".cache" / "flexmb" / "numba"))
+
+
+def _load(path: str, overrides: dict | None = None):
+    from .model.compile import compile_scene
+    from .scene import load_scene
+
+    scene = load_scene(path, overrides)
+    return scene, compile_scene(scene)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    _, model = _load(args.scene)
+    summary = model.summary()
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(f"scene {summary['scene']}: OK")
+    for k in ("dofs", "free_dofs", "prescribed_dofs", "nodes", "members", "tangent_nonzeros"):
+        print(f"  {k:18s} {summary[k]}")
+    print(f"  {'mass':18s} {summary['mass_kg']:.6g} kg")
+    print(f"  {'elements':18s} " + ", ".join(f"{k}: {v}" for k, v in summary["elements"].items()))
+    if summary["actuators"]:
+        print(f"  {'actuators':18s} {', '.join(summary['actuators'])}")
+    for g in summary["frame_groups"]:
+        print(f"  {'frame group':18s} {g}")
+    return 0
+
+
+class _Progress:
+    """A plain stderr progress bar (no dependency), redrawn at most 5 times a second."""
+
+    def __init__(self, until: float, enabled: bool):
+        self.until = until
+        self.enabled = enabled and sys.stderr.isatty()
+        self.last = 0.0
+
+    def __call__(self, sim, res) -> None:
+        now = time.perf_counter()
+        if not self.enabled or (now - self.last < 0.2 and sim.state.t < self.until):
+            return
+        self.last = now
+        frac = min(sim.state.t / self.until, 1.0)
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r[{bar:30s}] t = {sim.state.t:8.4f} s  iters {res.iterations:2d}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .simulator import Simulator
+
+    overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
+    scene, model = _load(args.scene, overrides)
+    sim = Simulator(model)
+    warm = sim.warmup()
+    sim.initialize()
+    until = scene.solver.until
+    progress = _Progress(until, not args.quiet)
+    error = ""
+    try:
+        sim.run(until, callback=progress)
+    except ConvergenceError as exc:
+        error = str(exc)
+    finally:
+        progress.close()
+    summary = sim.summary()
+    summary.update({"scene": scene.name, "scene_file": str(args.scene), "dt": scene.solver.dt,
+                    "until": until, "integrator": scene.solver.integrator, "analysis": scene.solver.analysis,
+                    "jit_warmup_s": warm, "completed": not error, "error": error,
+                    "outputs": sim.outputs()})
+    text = json.dumps(summary, indent=2, allow_nan=True)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(text + "\n")
+    if not args.quiet:
+        print(f"{scene.name}: {summary['steps']} steps to t = {summary['sim_time_s']:.6g} s in "
+              f"{summary['wall_time_s']:.3f} s (RTF {summary['rtf']:.3g}, {summary['steps_per_s']:.0f} steps/s, "
+              f"JIT warm-up {warm:.2f} s); Newton mean {summary['newton_iterations_mean']:.2f}, "
+              f"max {summary['newton_iterations_max']}; unconverged {summary['unconverged_steps']}")
+        for k, v in summary["outputs"].items():
+            print(f"  {k}: {v}")
+    if error:
+        print(f"flexmb run: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_commands(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .mechanisms import stewart
+
+    n = int(round(args.until / args.dt)) + 1
+    t = np.linspace(0.0, args.until, n)
+    lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time)
+    stewart.write_command_table(args.out, t, lengths, rates)
+    print(f"wrote {n} rows × 6 legs ({args.start} start) to {args.out}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="flexmb", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="verb", required=True)
+
+    c = sub.add_parser("check", help="validate a scene and print the model summary")
+    c.add_argument("scene")
+    c.add_argument("--json", action="store_true", help="print the summary as JSON")
+    c.set_defaults(func=cmd_check)
+
+    r = sub.add_parser("run", help="offline simulation with a JSON summary")
+    r.add_argument("scene")
+    r.add_argument("--until", type=float, help="end time (s); default: the scene's solver.until")
+    r.add_argument("--dt", type=float, help="time step (s); default: the scene's solver.dt")
+    r.add_argument("--integrator", choices=("newmark", "generalized_alpha"))
+    r.add_argument("--json", metavar="OUT", help="write the run summary (JSON) here")
+    r.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
+    r.set_defaults(func=cmd_run)
+
+    cm = sub.add_parser("commands", help="generate actuator command tables")
+    cm.add_argument("mechanism", choices=("stewart",))
+    cm.add_argument("--out", required=True, help="CSV file: t, leg1..leg6 (m), leg1_rate.. (m/s)")
+    cm.add_argument("--dt", type=float, default=1e-3, help="sample period (s)")
+    cm.add_argument("--until", type=float, default=20.0, help="end time (s), at most 20")
+    cm.add_argument("--start", choices=("exact", "blended"), default="blended",
+                    help="exact appendix law (non-zero initial velocity) or C²-blended start")
+    cm.add_argument("--blend-time", type=float, default=1.0, help="blend duration (s)")
+    cm.set_defaults(func=cmd_commands)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    _env_defaults()
+    args = build_parser().parse_args(argv)
+    for name in ("until", "dt"):
+        v = getattr(args, name, None)
+        if v is not None and (not math.isfinite(v) or v <= 0):
+            print(f"flexmb {args.verb}: --{name} must be a positive number, got {v}", file=sys.stderr)
+            return 1
+    try:
+        return args.func(args)
+    except SceneError as exc:
+        print(f"flexmb {args.verb}: scene error: {exc}", file=sys.stderr)
+        return 1
+    except FlexmbError as exc:
+        print(f"flexmb {args.verb}: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Time integrators (Newmark, generalized-α Arnold–Brüls) and the static load stepper."""

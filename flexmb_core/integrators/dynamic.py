@@ -1,0 +1,176 @@
+"""Implicit dynamics with Newton–Raphson: Newmark (β, γ) and generalized-α in the Arnold–Brüls
+form (equilibrium at t_{n+1}, SPEC §1.7). Newmark is the αm = αf = 0 member of the family.
+
+Unknowns at t_{n+1}: q. With the pseudo-acceleration ã,
+    ã(q) = (q − q_n − Δt v_n − Δt²(½−β) ã_n) / (β Δt²)
+    a(q) = ((1−αm) ã(q) + αm ã_n − αf a_n) / (1−αf),   v(q) = v_n + Δt[(1−γ) ã_n + γ ã(q)]
+    residual  r(q) = f_int(q; λ_{n+1}) + M (a + c_m v) − f_ext(t_{n+1})
+    tangent   K + (c_a + c_m c_v) M,  c_a = (1−αm)/((1−αf) β Δt²),  c_v = γ/(β Δt)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.assembly import assemble, update_load_scales
+from ..model.model import Model
+from ..model.workspace import State, Workspace
+from ..scene.schema import SolverSpec
+from ..solvers.linear import SparseLU
+from ..solvers.result import StepResult
+from .energy import csr_matvec, energies
+
+
+def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
+    """(αm, αf, β, γ) of the chosen integrator."""
+    if spec.integrator == "newmark":
+        return 0.0, 0.0, spec.beta, spec.gamma
+    rho = spec.rho_inf
+    am = (2.0 * rho - 1.0) / (rho + 1.0)
+    af = rho / (rho + 1.0)
+    gamma = 0.5 + af - am
+    beta = 0.25 * (gamma + 0.5) ** 2
+    return am, af, beta, gamma
+
+
+class DynamicIntegrator:
+    """One implicit step at a time; owns the linear solver and scratch vectors."""
+
+    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec):
+        self.model = model
+        self.ws = ws
+        self.spec = spec
+        self.am, self.af, self.beta, self.gamma = alpha_parameters(spec)
+        self.lu = SparseLU(model)
+        n = model.ndof
+        self._ma = np.zeros(n)
+        self._r = np.zeros(n)
+        self._backup = None
+        self._free = model.free
+        self._inv_scale = 1.0 / model.dof_scale[model.free]
+
+    # -- start ------------------------------------------------------------------------------
+    def initialize(self, state: State) -> StepResult:
+        """Consistent initial acceleration ``M_ff a_f = (f_ext − f_int − C v)_f`` (or zero)."""
+        m, ws = self.model, self.ws
+        update_load_scales(m, ws, state.t)
+        strain = assemble(m, ws, state.q, state.lam, False)
+        state.a[:] = 0.0
+        if self.spec.initial_acceleration == "consistent":
+            csr_matvec(*m.mass_csr, state.v, self._ma)
+            rhs = ws.f_ext - ws.r - m.mass_damping * self._ma
+            self.lu.factor(np.ascontiguousarray(m.mass_kdata))
+            state.a[self._free] = self.lu.solve(rhs[self._free])
+        state.atil[:] = state.a
+        kin, grav = energies(m, state)
+        return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
+
+    # -- one step ---------------------------------------------------------------------------
+    def step(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
+        """Advance ``state`` by ``dt`` to the actuator stretches ``lam_new``.
+
+        On failure the step is retried in 2, 4, … sub-steps (policy ``substep``) with the
+        stretches interpolated linearly; ``state`` is left unchanged if nothing converges.
+        """
+        if self._backup is None:
+            self._backup = state.copy()
+        self._backup.assign(state)
+        res = self._newton(state, dt, lam_new)
+        if res.converged or self.spec.on_unconverged != "substep":
+            if not res.converged and self.spec.on_unconverged == "stop":
+                state.assign(self._backup)
+            return res
+        lam0 = self._backup.lam.copy()
+        iters = res.iterations
+        for level in range(1, self.spec.max_substep_levels + 1):
+            state.assign(self._backup)
+            nsub = 2 ** level
+            ok = True
+            for k in range(1, nsub + 1):
+                lam_k = lam0 + (lam_new - lam0) * (k / nsub)
+                sub = self._newton(state, dt / nsub, lam_k)
+                iters += sub.iterations
+                if not sub.converged:
+                    ok = False
+                    break
+            if ok:
+                sub.iterations = iters
+                sub.substeps = nsub
+                sub.message = f"split into {nsub} sub-steps after: {res.message}"
+                return sub
+        state.assign(self._backup)
+        res.iterations = iters
+        res.message = f"no convergence even with {2 ** self.spec.max_substep_levels} sub-steps: {res.message}"
+        return res
+
+    def _newton(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
+        m, ws, spec = self.model, self.ws, self.spec
+        am, af, beta, gamma = self.am, self.af, self.beta, self.gamma
+        c_a = (1.0 - am) / ((1.0 - af) * beta * dt * dt)
+        c_v = gamma / (beta * dt)
+        c_m = m.mass_damping
+        free = self._free
+        q_n = state.q.copy()
+        v_n = state.v.copy()
+        a_n = state.a.copy()
+        at_n = state.atil.copy()
+        # q ↦ ã(q) = (q − q_hat)/(βΔt²)
+        q_hat = q_n + dt * v_n + dt * dt * (0.5 - beta) * at_n
+        t_new = state.t + dt
+        state.lam[:] = lam_new
+        update_load_scales(m, ws, t_new)
+        q = state.q
+        q[:] = q_hat + beta * dt * dt * at_n      # constant pseudo-acceleration predictor
+        prescribed_mask = m.free_index < 0
+        q[prescribed_mask] = q_n[prescribed_mask]
+        coef = c_a + c_m * c_v
+        converged = False
+        inc = math.inf
+        rel = math.inf
+        message = ""
+        it = 0
+        for it in range(1, spec.max_iterations + 1):
+            atil = (q - q_hat) / (beta * dt * dt)
+            a = ((1.0 - am) * atil + am * at_n - af * a_n) / (1.0 - af)
+            v = v_n + dt * ((1.0 - gamma) * at_n + gamma * atil)
+            assemble(m, ws, q, state.lam, True)
+            csr_matvec(*m.mass_csr, a + c_m * v, self._ma)
+            r = ws.r + self._ma - ws.f_ext
+            rf = r[free]
+            if not np.all(np.isfinite(rf)):
+                message = f"non-finite residual at Newton iteration {it}"
+                break
+            np.add(ws.kdata, coef * m.mass_kdata, out=ws.keff)
+            try:
+                self.lu.factor(ws.keff)
+            except RuntimeError as exc:
+                message = f"singular tangent at Newton iteration {it} ({exc})"
+                break
+            dq = self.lu.solve(-rf)
+            q[free] += dq
+            inc = float(np.max(np.abs(dq) * self._inv_scale)) if dq.size else 0.0
+            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(self._ma[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+            rel = float(np.linalg.norm(rf) / ref)
+            if not math.isfinite(inc):
+                message = f"non-finite increment at Newton iteration {it}"
+                break
+            if inc <= spec.tolerance:
+                converged = True
+                break
+        if not converged and not message:
+            message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e}, tolerance {spec.tolerance:.1e})"
+        atil = (q - q_hat) / (beta * dt * dt)
+        state.a[:] = ((1.0 - am) * atil + am * at_n - af * a_n) / (1.0 - af)
+        state.v[:] = v_n + dt * ((1.0 - gamma) * at_n + gamma * atil)
+        state.atil[:] = atil
+        state.t = t_new
+        if not converged:
+            return StepResult(False, it, rel, inc, 1, message=message)
+        strain = assemble(m, ws, q, state.lam, False)
+        csr_matvec(*m.mass_csr, state.a + c_m * state.v, self._ma)
+        r = (ws.r + self._ma - ws.f_ext)[free]
+        ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(self._ma[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+        kin, grav = energies(m, state)
+        return StepResult(True, it, float(np.linalg.norm(r) / ref), inc, 1, kin, strain, grav)

@@ -1,0 +1,95 @@
+"""Static equilibrium by load (pseudo-time) stepping with Newton–Raphson and step bisection.
+
+Every quantity that depends on time (load signals, actuator commands) is evaluated at the
+pseudo-time of the increment, so a static run is a sequence of equilibria t_k = k·T/N.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.assembly import assemble, update_load_scales
+from ..model.model import Model
+from ..model.workspace import State, Workspace
+from ..scene.schema import SolverSpec
+from ..solvers.linear import SparseLU
+from ..solvers.result import StepResult
+from .energy import energies
+
+
+class StaticSolver:
+    """Newton on ``f_int(q; λ(t)) = f_ext(t)`` for the free DOFs."""
+
+    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec):
+        self.model = model
+        self.ws = ws
+        self.spec = spec
+        self.lu = SparseLU(model)
+        self._inv_scale = 1.0 / model.dof_scale[model.free]
+
+    def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
+        """Equilibrium at pseudo-time ``t`` starting from ``state.q``; bisects on failure."""
+        backup = state.copy()
+        res = self._newton(state, t, lam)
+        if res.converged:
+            return res
+        t0, lam0 = backup.t, backup.lam.copy()
+        for level in range(1, self.spec.max_substep_levels + 1):
+            state.assign(backup)
+            nsub = 2 ** level
+            iters = 0
+            for k in range(1, nsub + 1):
+                sub = self._newton(state, t0 + (t - t0) * k / nsub, lam0 + (lam - lam0) * k / nsub)
+                iters += sub.iterations
+                if not sub.converged:
+                    break
+            else:
+                sub.iterations = iters
+                sub.substeps = nsub
+                sub.message = f"split into {nsub} load increments after: {res.message}"
+                return sub
+        state.assign(backup)
+        res.message = f"no convergence even with {2 ** self.spec.max_substep_levels} increments: {res.message}"
+        return res
+
+    def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
+        m, ws, spec = self.model, self.ws, self.spec
+        free = m.free
+        state.lam[:] = lam
+        state.t = t
+        update_load_scales(m, ws, t)
+        q = state.q
+        inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
+        for it in range(1, spec.max_iterations + 1):
+            assemble(m, ws, q, lam, True)
+            rf = (ws.r - ws.f_ext)[free]
+            if not np.all(np.isfinite(rf)):
+                message = f"non-finite residual at iteration {it}"
+                break
+            try:
+                self.lu.factor(ws.kdata)
+            except RuntimeError as exc:
+                message = f"singular tangent at iteration {it} ({exc}); a mechanism with a free motion needs a support"
+                break
+            dq = self.lu.solve(-rf)
+            if not np.all(np.isfinite(dq)):
+                message = f"non-finite increment at iteration {it}"
+                break
+            q[free] += dq
+            inc = float(np.max(np.abs(dq) * self._inv_scale))
+            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+            rel = float(np.linalg.norm(rf) / ref)
+            if inc <= spec.tolerance:
+                converged = True
+                break
+        if not converged:
+            if not message:
+                message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e})"
+            return StepResult(False, it, rel, inc, 1, message=message)
+        strain = assemble(m, ws, q, lam, False)
+        rf = (ws.r - ws.f_ext)[free]
+        ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+        _, grav = energies(m, state)
+        return StepResult(True, it, float(np.linalg.norm(rf) / ref), inc, 1, 0.0, strain, grav)

@@ -1,0 +1,1 @@
+"""Compile a scene into a read-only :class:`Model`; ``State`` and ``Workspace`` for the loop."""

@@ -1,0 +1,68 @@
+"""Global assembly: one njit group loop per element group, loads, and the external force vector."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.frame3d import frame_group, frame_group_actuator_dudlam
+from ..kernels.moments import conservative_moments, follower_moments
+from ..kernels.truss import truss_group, truss_group_actuator_dudlam
+from ..signals import evaluate
+from .model import Model
+from .workspace import Workspace
+
+
+def update_load_scales(model: Model, ws: Workspace, t: float) -> None:
+    """Evaluate every load signal at ``t`` and form ``ws.f_ext`` (nodal forces + gravity)."""
+    for i, s in enumerate(model.load_signals):
+        ws.load_scale[i] = evaluate(s, t)
+    for i, s in enumerate(model.moments.follower_signals):
+        ws.follower_scale[i] = evaluate(s, t)
+    for i, s in enumerate(model.moments.cons_signals):
+        ws.cons_scale[i] = evaluate(s, t)
+    if model.load_vectors.shape[0]:
+        np.dot(ws.load_scale, model.load_vectors, out=ws.f_ext)
+    else:
+        ws.f_ext[:] = 0.0
+    g = evaluate(model.gravity_signal, t)
+    if g != 0.0:
+        ws.f_ext += g * model.gravity_vector
+
+
+def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool) -> float:
+    """Internal forces minus configuration-dependent loads into ``ws.r`` (full), and the tangent
+    of that into ``ws.kdata`` (free–free CSR) when ``want_k``. Returns the strain energy (J).
+
+    Moment loads use the scales last set by :func:`update_load_scales`.
+    """
+    ws.r[:] = 0.0
+    if want_k:
+        ws.kdata[:] = 0.0
+    energy = 0.0
+    for g, sc in zip(model.frame_groups, ws.frame_scratch):
+        energy += frame_group(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, g.smap, want_k,
+                              ws.r, ws.kdata, *sc)
+    if model.truss is not None:
+        t = model.truss
+        energy += truss_group(q, t.edofs, t.l0, t.ea, t.act, lam, t.smap, want_k, ws.r, ws.kdata,
+                              *ws.truss_scratch)
+    m = model.moments
+    if m.follower_vdofs.shape[0]:
+        follower_moments(q, m.follower_vdofs, m.follower_mbody, ws.follower_scale, m.follower_smap,
+                         want_k, ws.r, ws.kdata)
+    if m.cons_vdofs.shape[0]:
+        conservative_moments(q, m.cons_vdofs, m.cons_axes, m.cons_magnitude, ws.cons_scale, m.cons_smap,
+                             want_k, ws.r, ws.kdata)
+    return energy
+
+
+def actuator_dudlam(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """dU/dλ per actuator (J) into ``ws.dudlam``; the axial force is ``−dU/dλ / L0``."""
+    ws.dudlam[:] = 0.0
+    for g, sc in zip(model.frame_groups, ws.frame_scratch):
+        if np.any(g.act >= 0):
+            frame_group_actuator_dudlam(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, ws.dudlam, *sc)
+    if model.truss is not None and np.any(model.truss.act >= 0):
+        t = model.truss
+        truss_group_actuator_dudlam(q, t.edofs, t.l0, t.ea, t.act, lam, ws.dudlam, *ws.truss_scratch)
+    return ws.dudlam

@@ -1,0 +1,358 @@
+"""Scene → :class:`Model`: DOF numbering, element groups (only the kinds present), constant mass,
+free–free sparse pattern and the scatter maps that let kernels add into CSR data directly."""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import sections as secmod
+from ..errors import SceneError
+from ..scene.schema import Member, Scene, Signal
+from .frame_geometry import frame_element_geometry, frame_element_mass
+from .model import Actuators, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
+
+
+def _freeze(*arrays: np.ndarray) -> None:
+    for a in arrays:
+        a.setflags(write=False)
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def member_geometry(mem: Member, nodes: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Reference node positions, tangents and section vectors along a member.
+
+    Returns ``x (m, 3)``, ``t (m, 3)``, ``v1 (m, 3)``, ``v2 (m, 3)`` with m = elements·order + 1.
+    ``V2`` is ``up`` made orthogonal to the tangent (default: global z, or x for members within
+    8° of vertical); ``V1 = V2 × t`` so that (t, V1, V2) is right-handed.
+    """
+    a = np.asarray(nodes[mem.start], dtype=float)
+    b = np.asarray(nodes[mem.end], dtype=float)
+    m = mem.elements * mem.order + 1
+    s = np.linspace(0.0, 1.0, m)
+    if mem.arc_center is None:
+        x = a + s[:, None] * (b - a)
+        t = np.tile(_unit(b - a), (m, 1))
+    else:
+        c = np.asarray(mem.arc_center, dtype=float)
+        ra, rb = a - c, b - c
+        radius = np.linalg.norm(ra)
+        normal = np.cross(ra, rb)
+        if np.linalg.norm(normal) < 1e-12 * radius**2:
+            raise SceneError(f"{mem.name}", "arc from/to are collinear with the centre (180° or 0° arc): ambiguous plane")
+        normal = _unit(normal)
+        angle = math.atan2(np.linalg.norm(np.cross(ra, rb)), ra @ rb)
+        e1 = ra / radius
+        e2 = np.cross(normal, e1)
+        phi = s * angle
+        x = c + radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+        t = -np.sin(phi)[:, None] * e1 + np.cos(phi)[:, None] * e2
+    v1 = np.empty_like(t)
+    v2 = np.empty_like(t)
+    for k in range(m):
+        up = np.asarray(mem.up, dtype=float) if mem.up is not None else (
+            np.array([0.0, 0.0, 1.0]) if abs(t[k, 2]) < math.cos(math.radians(8)) else np.array([1.0, 0.0, 0.0]))
+        u = up - (up @ t[k]) * t[k]
+        if np.linalg.norm(u) < 1e-9 * np.linalg.norm(up):
+            raise SceneError(f"{mem.name}.up", f"'up' {list(up)} is parallel to the member axis")
+        v2[k] = _unit(u)
+        v1[k] = np.cross(v2[k], t[k])
+    return x, t, v1, v2
+
+
+def compile_scene(scene: Scene) -> Model:
+    """Build the read-only :class:`Model` of a validated scene."""
+    mats = scene.materials
+    secs: dict[str, secmod.SectionProperties] = {}
+    for name, spec in scene.sections.items():
+        used_nu = [mats[m.material].nu for m in scene.members.values() if m.section == name]
+        nu = used_nu[0] if used_nu else 0.0
+        if spec.shape == "rectangle":
+            p = secmod.rectangle(*spec.dims, nu)
+        elif spec.shape == "circle":
+            p = secmod.circle(*spec.dims, nu)
+        else:
+            p = secmod.tube(*spec.dims, nu)
+        secs[name] = secmod.with_overrides(p, spec.torsion_constant, spec.shear_factor)
+
+    node_names = list(scene.nodes)
+    node_x = [np.asarray(scene.nodes[n], dtype=float) for n in node_names]
+    node_lookup = {n: i for i, n in enumerate(node_names)}
+    ydof = [-1] * len(node_names)
+    ndof = 0
+    q0: list[float] = []
+    scale_kind: list[int] = []  # 0 position, 1 vector
+
+    def take(values, kind):
+        nonlocal ndof
+        start = ndof
+        q0.extend(values)
+        scale_kind.extend([kind] * len(values))
+        ndof += len(values)
+        return start
+
+    member_infos: list[MemberInfo] = []
+    member_geom = {}
+    for mem in scene.members.values():
+        x, t, v1, v2 = member_geometry(mem, scene.nodes)
+        member_geom[mem.name] = (x, t, v1, v2)
+        m = x.shape[0]
+        ids = np.empty(m, dtype=np.int64)
+        ids[0], ids[-1] = node_lookup[mem.start], node_lookup[mem.end]
+        for k in range(1, m - 1):
+            name = f"{mem.name}/{k}"
+            node_lookup[name] = len(node_names)
+            node_names.append(name)
+            node_x.append(x[k])
+            ydof.append(-1)
+            ids[k] = node_lookup[name]
+        is_frame = mem.kind == "frame" or (mem.kind == "actuator" and mem.actuator.variant == "frame")
+        yd = np.empty((m, 3), dtype=np.int64)
+        vd = np.full((m, 6), -1, dtype=np.int64)
+        for k in range(m):
+            n = ids[k]
+            if ydof[n] < 0:
+                ydof[n] = take(node_x[n], 0)
+            yd[k] = ydof[n] + np.arange(3)
+            if is_frame:
+                vd[k] = take(np.concatenate((v1[k], v2[k])), 1) + np.arange(6)
+        if mem.kind == "actuator" and mem.arc_center is not None:
+            raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
+        member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd,
+                                       float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1)))))
+    unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
+    if unused:
+        raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member")
+
+    q0_arr = np.asarray(q0, dtype=float)
+    nodes_xyz = np.asarray(node_x)
+    l_char = max(float(np.linalg.norm(nodes_xyz.max(0) - nodes_xyz.min(0))), max(mi.length for mi in member_infos))
+    dof_scale = np.where(np.asarray(scale_kind) == 0, l_char, 1.0)
+    node_ydofs = np.asarray(ydof, dtype=np.int64)[:, None] + np.arange(3)
+    member_lookup = {mi.name: i for i, mi in enumerate(member_infos)}
+
+    # -- prescribed DOFs ------------------------------------------------------------------
+    fixed = np.zeros(ndof, dtype=bool)
+    for s in scene.supports:
+        n = node_lookup[s.node]
+        if s.type in ("clamp", "ball"):
+            fixed[node_ydofs[n]] = True
+        if s.type in ("clamp", "fixed_vector"):
+            for mi in member_infos:
+                if s.member is not None and mi.name != s.member:
+                    continue
+                for k in np.nonzero(mi.nodes == n)[0]:
+                    if mi.vdofs[k, 0] < 0:
+                        continue
+                    if s.type == "clamp":
+                        fixed[mi.vdofs[k]] = True
+                    else:
+                        off = 0 if s.vector == "v1" else 3
+                        fixed[mi.vdofs[k, off:off + 3]] = True
+    free = np.nonzero(~fixed)[0].astype(np.int64)
+    free_index = np.full(ndof, -1, dtype=np.int64)
+    free_index[free] = np.arange(free.size)
+
+    # -- actuators ------------------------------------------------------------------------
+    act_names = [m.name for m in scene.members.values() if m.kind == "actuator"]
+    act_lookup = {n: i for i, n in enumerate(act_names)}
+    act_l0 = np.array([member_infos[member_lookup[n]].length for n in act_names], dtype=float)
+    act_cmd = tuple(scene.members[n].actuator.command for n in act_names)
+    act_stroke = np.array([scene.members[n].actuator.stroke or (0.0, math.inf) for n in act_names],
+                          dtype=float).reshape(-1, 2)
+    act_ends = np.array([np.concatenate((member_infos[member_lookup[n]].ydofs[0],
+                                         member_infos[member_lookup[n]].ydofs[-1])) for n in act_names],
+                        dtype=np.int64).reshape(-1, 6)
+
+    # -- elements ------------------------------------------------------------------------
+    frame_build: dict[tuple[int, int], dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    truss_build: dict[str, list] = defaultdict(list)
+    mass_rows: list[np.ndarray] = []
+    mass_cols: list[np.ndarray] = []
+    mass_vals: list[np.ndarray] = []
+    for mi_id, mem in enumerate(scene.members.values()):
+        info = member_infos[mi_id]
+        mat = mats[mem.material]
+        sec = secs[mem.section]
+        act = act_lookup.get(mem.name, -1)
+        x, _, v1, v2 = member_geom[mem.name]
+        if info.vdofs[0, 0] >= 0:
+            n_axial = mem.order + 2
+            key = (mem.order, sec.points.shape[0])
+            row = np.array([mat.E, mat.E, mat.G, mat.G, sec.torsion / sec.polar, sec.shear_factor])
+            iscale = None
+            if mem.mass is not None:
+                iscale = np.ones(3)
+                if mem.mass.per_length is not None:
+                    iscale[0] = mem.mass.per_length / (mat.rho * sec.area)
+                if mem.mass.rotary_inertia is not None:
+                    iscale[1] = mem.mass.rotary_inertia[0] / (mat.rho * sec.i1)
+                    iscale[2] = mem.mass.rotary_inertia[1] / (mat.rho * sec.i2)
+                iscale = np.tile(iscale, mem.order + 1)
+            for e in range(mem.elements):
+                k = slice(e * mem.order, e * mem.order + mem.order + 1)
+                dax, dsec, w, psi = frame_element_geometry(x[k], v1[k], v2[k], mem.order, n_axial, sec.points)
+                edofs = np.concatenate([np.concatenate((info.ydofs[j], info.vdofs[j]))
+                                        for j in range(k.start, k.stop)])
+                b = frame_build[key]
+                b["edofs"].append(edofs)
+                b["dax"].append(dax)
+                b["dsec"].append(dsec)
+                b["w"].append(w)
+                b["mat"].append(row)
+                b["act"].append(act)
+                b["member"].append(mi_id)
+                me = frame_element_mass(psi, w, mat.rho, iscale)
+                mass_rows.append(np.repeat(edofs, edofs.size))
+                mass_cols.append(np.tile(edofs, edofs.size))
+                mass_vals.append(me.ravel())
+        else:
+            ea = mat.E * sec.area
+            rho_a = mem.mass.per_length if (mem.mass and mem.mass.per_length) else mat.rho * sec.area
+            for e in range(mem.elements):
+                edofs = np.concatenate((info.ydofs[e], info.ydofs[e + 1]))
+                l0 = float(np.linalg.norm(x[e + 1] - x[e]))
+                truss_build["edofs"].append(edofs)
+                truss_build["l0"].append(l0)
+                truss_build["ea"].append(ea)
+                truss_build["act"].append(act)
+                truss_build["member"].append(mi_id)
+                me = rho_a * l0 / 6.0 * np.kron(np.array([[2.0, 1.0], [1.0, 2.0]]), np.eye(3))
+                mass_rows.append(np.repeat(edofs, 6))
+                mass_cols.append(np.tile(edofs, 6))
+                mass_vals.append(me.ravel())
+    for pm in scene.point_masses:
+        d = node_ydofs[node_lookup[pm.node]]
+        mass_rows.append(d)
+        mass_cols.append(d)
+        mass_vals.append(np.full(3, pm.mass))
+
+    # -- sparse pattern over free DOFs ----------------------------------------------------
+    nfree = free.size
+    pair_r, pair_c = [], []
+    for b in frame_build.values():
+        for ed in b["edofs"]:
+            pair_r.append(np.repeat(ed, ed.size))
+            pair_c.append(np.tile(ed, ed.size))
+    for ed in truss_build.get("edofs", []):
+        pair_r.append(np.repeat(ed, 6))
+        pair_c.append(np.tile(ed, 6))
+    pair_r.extend(mass_rows)
+    pair_c.extend(mass_cols)
+    pr = free_index[np.concatenate(pair_r)]
+    pc = free_index[np.concatenate(pair_c)]
+    ok = (pr >= 0) & (pc >= 0)
+    keys = np.unique(pr[ok] * nfree + pc[ok])
+    rows = keys // nfree
+    indices = (keys % nfree).astype(np.int64)
+    indptr = np.zeros(nfree + 1, dtype=np.int64)
+    np.add.at(indptr, rows + 1, 1)
+    indptr = np.cumsum(indptr).astype(np.int64)
+
+    def scatter_map(ed: np.ndarray) -> np.ndarray:
+        r = free_index[np.repeat(ed, ed.size)]
+        c = free_index[np.tile(ed, ed.size)]
+        out = np.full(r.size, -1, dtype=np.int64)
+        ok_ = (r >= 0) & (c >= 0)
+        out[ok_] = np.searchsorted(keys, r[ok_] * nfree + c[ok_])
+        return out
+
+    groups = []
+    for (order, nsec), b in sorted(frame_build.items()):
+        edofs = np.asarray(b["edofs"], dtype=np.int64)
+        g = FrameGroup(order, nsec, edofs, np.ascontiguousarray(b["dax"]), np.ascontiguousarray(b["dsec"]),
+                       np.ascontiguousarray(b["w"]), np.ascontiguousarray(b["mat"], dtype=float),
+                       np.asarray(b["act"], dtype=np.int64),
+                       np.ascontiguousarray([scatter_map(ed) for ed in edofs], dtype=np.int64),
+                       np.asarray(b["member"], dtype=np.int64))
+        _freeze(g.edofs, g.dax, g.dsec, g.w, g.mat, g.act, g.smap, g.member)
+        groups.append(g)
+    truss = None
+    if truss_build:
+        edofs = np.asarray(truss_build["edofs"], dtype=np.int64)
+        truss = TrussGroup(edofs, np.asarray(truss_build["l0"], dtype=float),
+                           np.asarray(truss_build["ea"], dtype=float),
+                           np.asarray(truss_build["act"], dtype=np.int64),
+                           np.ascontiguousarray([scatter_map(ed) for ed in edofs], dtype=np.int64),
+                           np.asarray(truss_build["member"], dtype=np.int64))
+        _freeze(truss.edofs, truss.l0, truss.ea, truss.act, truss.smap, truss.member)
+
+    # -- mass -------------------------------------------------------------------------------
+    mr, mc, mv = np.concatenate(mass_rows), np.concatenate(mass_cols), np.concatenate(mass_vals)
+    mfull = sp.csr_matrix((mv, (mr, mc)), shape=(ndof, ndof))
+    mfull.sum_duplicates()
+    mfull.sort_indices()
+    fr, fc = free_index[mr], free_index[mc]
+    ok = (fr >= 0) & (fc >= 0)
+    mass_kdata = np.zeros(keys.size)
+    np.add.at(mass_kdata, np.searchsorted(keys, fr[ok] * nfree + fc[ok]), mv[ok])
+    u_trans = np.zeros((ndof, 3))
+    for n in range(len(node_names)):
+        u_trans[node_ydofs[n], np.arange(3)] = 1.0
+    total_mass = float((mfull @ u_trans)[:, 0].sum())
+
+    # -- loads ------------------------------------------------------------------------------
+    load_vectors = np.zeros((len(scene.forces), ndof))
+    for i, f in enumerate(scene.forces):
+        load_vectors[i, node_ydofs[node_lookup[f.node]]] = f.force
+    gravity_vector = np.zeros(ndof)
+    gravity_signal = Signal()
+    if scene.gravity is not None:
+        gravity_vector = mfull @ (u_trans @ np.asarray(scene.gravity.acceleration, dtype=float))
+        gravity_signal = scene.gravity.signal
+    moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map)
+
+    mass_csr = (mfull.indptr.astype(np.int64), mfull.indices.astype(np.int64), mfull.data.astype(float))
+    actuators = Actuators(tuple(act_names), np.array([member_lookup[n] for n in act_names], dtype=np.int64),
+                          act_l0, act_cmd, act_stroke, act_ends)
+    _freeze(q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, *mass_csr, load_vectors,
+            gravity_vector, node_ydofs, act_l0, act_stroke, act_ends, actuators.member)
+    return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
+                 tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
+                 gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
+                 scene.mass_damping, total_mass, node_lookup, member_lookup)
+
+
+def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map) -> MomentLoads:
+    f_v, f_m, f_s, f_sig = [], [], [], []
+    c_v, c_ax, c_mag, c_s, c_sig = [], [], [], [], []
+    for mo in scene.moments:
+        info = member_infos[member_lookup[mo.member]]
+        k = int(np.nonzero(info.nodes == node_lookup[mo.node])[0][0])
+        _, t, v1, v2 = member_geom[mo.member]
+        vd = info.vdofs[k]
+        mvec = np.asarray(mo.moment, dtype=float)
+        if mo.follower:
+            f_v.append(vd)
+            f_m.append([mvec @ t[k], mvec @ v1[k], mvec @ v2[k]])
+            f_s.append(scatter_map(vd))
+            f_sig.append(mo.signal)
+        else:
+            mag = float(np.linalg.norm(mvec))
+            if mag == 0.0:
+                continue
+            n = mvec / mag
+            use_v1 = abs(v1[k] @ n) <= abs(v2[k] @ n)
+            v0 = v1[k] if use_v1 else v2[k]
+            ids = vd[:3] if use_v1 else vd[3:]
+            a = v0 - (v0 @ n) * n
+            a /= np.linalg.norm(a)
+            c_v.append(ids)
+            c_ax.append(np.array([a, np.cross(n, a), n]))
+            c_mag.append(mag)
+            c_s.append(scatter_map(ids))
+            c_sig.append(mo.signal)
+    out = MomentLoads(np.asarray(f_v, dtype=np.int64).reshape(-1, 6), np.asarray(f_m, dtype=float).reshape(-1, 3),
+                      np.asarray(f_s, dtype=np.int64).reshape(-1, 36), tuple(f_sig),
+                      np.asarray(c_v, dtype=np.int64).reshape(-1, 3), np.asarray(c_ax, dtype=float).reshape(-1, 3, 3),
+                      np.asarray(c_mag, dtype=float), np.asarray(c_s, dtype=np.int64).reshape(-1, 9), tuple(c_sig))
+    _freeze(out.follower_vdofs, out.follower_mbody, out.follower_smap, out.cons_vdofs, out.cons_axes,
+            out.cons_magnitude, out.cons_smap)
+    return out

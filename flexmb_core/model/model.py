@@ -1,0 +1,162 @@
+"""The compiled, read-only model: arrays grouped by element kind, DOF maps, sparse pattern, names."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..scene.schema import Scene, Signal
+
+
+@dataclass(frozen=True)
+class FrameGroup:
+    """Frame (and frame-actuator) elements of one order and one section rule.
+
+    Arrays: ``edofs (ne, 9n)`` int64; ``dax, dsec (ne, nip, 3n, 3)``; ``w (ne, nip)`` (m³);
+    ``mat (ne, 6)`` [E, E_t, G, G_t, κ_t, k_s]; ``act (ne,)`` actuator id or −1;
+    ``smap (ne, (9n)²)`` CSR position per local entry (−1 where a DOF is prescribed);
+    ``member (ne,)`` member id.
+    """
+
+    order: int
+    nsec: int
+    edofs: np.ndarray
+    dax: np.ndarray
+    dsec: np.ndarray
+    w: np.ndarray
+    mat: np.ndarray
+    act: np.ndarray
+    smap: np.ndarray
+    member: np.ndarray
+
+    @property
+    def n_elements(self) -> int:
+        return self.edofs.shape[0]
+
+
+@dataclass(frozen=True)
+class TrussGroup:
+    """2-node bars (trusses and bar actuators): ``edofs (ne, 6)``, ``l0, ea (ne,)``, ``act``, ``smap``."""
+
+    edofs: np.ndarray
+    l0: np.ndarray
+    ea: np.ndarray
+    act: np.ndarray
+    smap: np.ndarray
+    member: np.ndarray
+
+    @property
+    def n_elements(self) -> int:
+        return self.edofs.shape[0]
+
+
+@dataclass(frozen=True)
+class MomentLoads:
+    """Moments through section vectors (see :mod:`flexmb_core.kernels.moments`)."""
+
+    follower_vdofs: np.ndarray      # (nf, 6)
+    follower_mbody: np.ndarray      # (nf, 3)
+    follower_smap: np.ndarray       # (nf, 36)
+    follower_signals: tuple[Signal, ...]
+    cons_vdofs: np.ndarray          # (nc, 3)
+    cons_axes: np.ndarray           # (nc, 3, 3)
+    cons_magnitude: np.ndarray      # (nc,)
+    cons_smap: np.ndarray           # (nc, 9)
+    cons_signals: tuple[Signal, ...]
+
+
+@dataclass(frozen=True)
+class MemberInfo:
+    """Where a member lives in the DOF vector.
+
+    ``nodes (m,)`` global node ids along the member; ``ydofs (m, 3)``; ``vdofs (m, 6)`` the member's
+    own [V1, V2] ids at each of its nodes (−1 for bars).
+    """
+
+    name: str
+    kind: str
+    nodes: np.ndarray
+    ydofs: np.ndarray
+    vdofs: np.ndarray
+    length: float
+
+
+@dataclass(frozen=True)
+class Actuators:
+    names: tuple[str, ...]
+    member: np.ndarray              # (na,) member id
+    l0: np.ndarray                  # (na,) reference length (m)
+    commands: tuple[Signal | None, ...]
+    stroke: np.ndarray              # (na, 2) (m); [0, inf] when undeclared
+    end_ydofs: np.ndarray           # (na, 6) ids of the two end positions
+
+
+@dataclass(frozen=True)
+class Model:
+    """Everything the time loop reads; nothing in it changes after :func:`compile_scene`."""
+
+    scene: Scene
+    ndof: int
+    q0: np.ndarray                  # (ndof,) reference configuration
+    dof_scale: np.ndarray           # (ndof,) m for positions, 1 for vectors (convergence test)
+    free: np.ndarray                # (nfree,) ids of free DOFs
+    free_index: np.ndarray          # (ndof,) position among free DOFs or −1
+    indptr: np.ndarray              # CSR pattern of the free–free tangent
+    indices: np.ndarray
+    mass_kdata: np.ndarray          # (nnz,) M on the tangent pattern
+    mass_csr: tuple[np.ndarray, np.ndarray, np.ndarray]  # full M (indptr, indices, data)
+    frame_groups: tuple[FrameGroup, ...]
+    truss: TrussGroup | None
+    moments: MomentLoads
+    load_vectors: np.ndarray        # (nl, ndof) nodal force patterns (N)
+    load_signals: tuple[Signal, ...]
+    gravity_vector: np.ndarray      # (ndof,) = M · u_g (N) for the scene's gravity (zeros if none)
+    gravity_signal: Signal
+    actuators: Actuators
+    members: tuple[MemberInfo, ...]
+    node_names: tuple[str, ...]
+    node_ydofs: np.ndarray          # (nnodes, 3)
+    mass_damping: float
+    total_mass: float
+    node_lookup: dict[str, int] = field(default_factory=dict)
+    member_lookup: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def nfree(self) -> int:
+        return self.free.size
+
+    @property
+    def nnz(self) -> int:
+        return self.indices.size
+
+    def node(self, name: str) -> int:
+        """Global node id of a named node (``KeyError`` names the known ones)."""
+        try:
+            return self.node_lookup[name]
+        except KeyError:
+            raise KeyError(f"unknown node '{name}'; known: {sorted(self.scene.nodes)}") from None
+
+    def member(self, name: str) -> MemberInfo:
+        try:
+            return self.members[self.member_lookup[name]]
+        except KeyError:
+            raise KeyError(f"unknown member '{name}'; known: {sorted(self.member_lookup)}") from None
+
+    def summary(self) -> dict:
+        """Counts for ``flexmb check``."""
+        kinds: dict[str, int] = {}
+        for g in self.frame_groups:
+            for e in range(g.n_elements):
+                k = "actuator(frame)" if g.act[e] >= 0 else "frame"
+                kinds[k] = kinds.get(k, 0) + 1
+        if self.truss is not None:
+            for e in range(self.truss.n_elements):
+                k = "actuator(bar)" if self.truss.act[e] >= 0 else "truss"
+                kinds[k] = kinds.get(k, 0) + 1
+        return {"scene": self.scene.name, "dofs": self.ndof, "free_dofs": self.nfree,
+                "prescribed_dofs": self.ndof - self.nfree, "nodes": len(self.node_names),
+                "members": len(self.members), "elements": kinds, "actuators": list(self.actuators.names),
+                "tangent_nonzeros": self.nnz, "mass_kg": self.total_mass,
+                "frame_groups": [f"order {g.order}, {g.n_elements} el., {g.w.shape[1]} points/el."
+                                 for g in self.frame_groups]}

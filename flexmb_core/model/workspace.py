@@ -1,0 +1,63 @@
+"""Mutable simulation data: :class:`State` (what evolves) and :class:`Workspace` (buffers)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kernels.frame3d import frame_scratch
+from .model import Model
+
+
+@dataclass
+class State:
+    """Time, unknowns and their rates, and the actuator stretches in force.
+
+    ``q, v, a (ndof,)``: positions/vectors, velocities, accelerations; ``atil (ndof,)`` the
+    generalized-α pseudo-acceleration (equals ``a`` for Newmark); ``lam (na,)`` actuator
+    stretch L_cmd/L0.
+    """
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    atil: np.ndarray
+    lam: np.ndarray
+
+    @classmethod
+    def at_rest(cls, model: Model, t: float = 0.0) -> "State":
+        n = model.ndof
+        return cls(t, model.q0.copy(), np.zeros(n), np.zeros(n), np.zeros(n),
+                   np.ones(model.actuators.l0.size))
+
+    def copy(self) -> "State":
+        return State(self.t, self.q.copy(), self.v.copy(), self.a.copy(), self.atil.copy(), self.lam.copy())
+
+    def assign(self, other: "State") -> None:
+        """Copy ``other`` into this state's arrays (no allocation)."""
+        self.t = other.t
+        self.q[:] = other.q
+        self.v[:] = other.v
+        self.a[:] = other.a
+        self.atil[:] = other.atil
+        self.lam[:] = other.lam
+
+
+class Workspace:
+    """Every buffer the time loop touches, allocated once per model."""
+
+    def __init__(self, model: Model):
+        n = model.ndof
+        self.r = np.zeros(n)            # internal force (+ follower loads), full
+        self.kdata = np.zeros(model.nnz)
+        self.keff = np.zeros(model.nnz)
+        self.tmp = np.zeros(n)
+        self.f_ext = np.zeros(n)
+        self.frame_scratch = [frame_scratch(g.w.shape[1], g.dax.shape[2]) for g in model.frame_groups]
+        self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros((6, 6)))
+        self.follower_scale = np.ones(model.moments.follower_vdofs.shape[0])
+        self.cons_scale = np.ones(model.moments.cons_vdofs.shape[0])
+        self.load_scale = np.ones(model.load_vectors.shape[0])
+        self.dudlam = np.zeros(model.actuators.l0.size)

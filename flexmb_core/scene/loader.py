@@ -1,0 +1,302 @@
+"""Strict YAML loader: unknown keys, wrong shapes or units and dangling names are errors that
+name ``file:key`` and what was expected (``flexmb check SCENE``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+import re
+
+import yaml
+
+from ..errors import SceneError
+from .reader import Node
+from .schema import (ActuatorSpec, Force, Gravity, MassOverride, Material, Member, Moment,
+                     Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
+
+OUTPUT_KINDS = {
+    "node_position": ("node",),
+    "node_displacement": ("node",),
+    "section_vectors": ("node", "member"),
+    "actuator_length": ("actuator",),
+    "actuator_command": ("actuator",),
+    "actuator_force": ("actuator",),
+    "energy": (),
+    "member_shape": ("member",),
+}
+
+
+class _SceneYamlLoader(yaml.SafeLoader):
+    """SafeLoader that also reads ``1e9`` / ``200.0e9`` as floats (YAML 1.2), not strings."""
+
+
+_SceneYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                |[-+]?\.(?:inf|Inf|INF)
+                |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """Read and validate a scene file. ``overrides`` are merged into ``solver`` (CLI flags)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
+    try:
+        data = yaml.load(text, Loader=_SceneYamlLoader)
+    except yaml.YAMLError as exc:
+        raise SceneError(str(path), f"not valid YAML: {exc}") from None
+    return scene_from_dict(data, source=str(path), overrides=overrides)
+
+
+def scene_from_dict(data: Any, source: str = "<dict>",
+                    overrides: dict[str, Any] | None = None) -> Scene:
+    """Validate a scene given as nested dicts (as parsed from YAML)."""
+    root = Node(data, "", source).mapping(
+        {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
+         "point_masses", "damping", "solver", "outputs"},
+        {"name", "materials", "sections", "nodes", "members"})
+    name = root.get("name").string()
+    description = root.get("description", "").value
+    if not isinstance(description, str):
+        raise root.fail("expected a string", "description")
+
+    materials = {k: _material(k, n) for k, n in root.get("materials").items()}
+    sections = {k: _section(k, n) for k, n in root.get("sections").items()}
+    nodes = {k: n.vector(3, unit="m") for k, n in root.get("nodes").items()}
+    if not materials or not sections or not nodes:
+        raise root.fail("materials, sections and nodes must each define at least one entry")
+    members = {k: _member(k, n, materials, sections, nodes) for k, n in root.get("members").items()}
+    if not members:
+        raise root.fail("at least one member is required", "members")
+
+    supports = tuple(_support(n, nodes, members) for n in root.get("supports", []).list())
+    forces, moments, gravity = _loads(root.get("loads", {}), nodes, members)
+    pmasses = tuple(PointMass(k, n.mapping({"node", "mass"}, {"node", "mass"}).get("node").name_in(nodes, "node"),
+                              n.get("mass").number(positive=True, unit="kg"))
+                    for k, n in root.get("point_masses", {}).items())
+    damp = root.get("damping", {}).mapping({"mass_proportional"})
+    c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
+    solver = _solver(root.get("solver", {}), overrides or {})
+    outputs = tuple(_output(k, n, nodes, members) for k, n in root.get("outputs", {}).items())
+    return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
+                 moments, pmasses, gravity, c_m, solver, outputs)
+
+
+# -- pieces -------------------------------------------------------------------------------
+def _material(name: str, n: Node) -> Material:
+    n.mapping({"E", "nu", "rho", "G"}, {"E", "rho"})
+    E = n.get("E").number(positive=True, unit="Pa")
+    nu = n.get("nu", 0.0).number(lo=-0.99, hi=0.4999)
+    rho = n.get("rho").number(positive=True, unit="kg/m³")
+    G = n.get("G").number(positive=True, unit="Pa") if n.has("G") else E / (2.0 * (1.0 + nu))
+    return Material(name, E, nu, rho, G)
+
+
+def _section(name: str, n: Node) -> SectionSpec:
+    shape = n.mapping({"shape", "width", "height", "radius", "outer_radius", "inner_radius",
+                       "thickness", "torsion_constant", "shear_factor"}, {"shape"}
+                      ).get("shape").string(("rectangle", "circle", "tube"))
+    allowed = {"rectangle": {"width", "height"}, "circle": {"radius"},
+               "tube": {"outer_radius", "inner_radius", "thickness"}}[shape]
+    extra = sorted(k for k in n.value if k not in allowed | {"shape", "torsion_constant", "shear_factor"})
+    if extra:
+        raise n.fail(f"key(s) {extra} do not apply to a {shape}; expected {sorted(allowed)}")
+    if shape == "rectangle":
+        dims = (n.get("width").number(positive=True, unit="m"), n.get("height").number(positive=True, unit="m"))
+    elif shape == "circle":
+        dims = (n.get("radius").number(positive=True, unit="m"),)
+    else:
+        ro = n.get("outer_radius").number(positive=True, unit="m")
+        if n.has("inner_radius") == n.has("thickness"):
+            raise n.fail("a tube needs exactly one of 'inner_radius' or 'thickness'")
+        ri = (n.get("inner_radius").number(nonneg=True, unit="m") if n.has("inner_radius")
+              else ro - n.get("thickness").number(positive=True, unit="m"))
+        if not 0.0 <= ri < ro:
+            raise n.fail(f"inner radius {ri} must lie in [0, outer_radius={ro})")
+        dims = (ro, ri)
+    tc = n.get("torsion_constant").number(positive=True, unit="m⁴") if n.has("torsion_constant") else None
+    ks = n.get("shear_factor").number(positive=True, hi=2.0) if n.has("shear_factor") else None
+    return SectionSpec(name, shape, dims, tc, ks)
+
+
+def signal(n: Node, *, default_value: float = 1.0) -> Signal:
+    """Parse a time signal (see :class:`Signal`)."""
+    if isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
+        return Signal("constant", value=n.number())
+    kind = n.mapping({"kind", "value", "start", "end", "t0", "duration", "shape", "offset",
+                      "amplitude", "frequency", "phase", "t", "values"}, {"kind"}
+                     ).get("kind").string(("constant", "ramp", "sine", "table"))
+    keys = {"constant": {"value"}, "ramp": {"start", "end", "t0", "duration", "shape"},
+            "sine": {"offset", "amplitude", "frequency", "phase"}, "table": {"t", "values"}}[kind]
+    extra = sorted(k for k in n.value if k not in keys | {"kind"})
+    if extra:
+        raise n.fail(f"key(s) {extra} do not apply to a '{kind}' signal; expected {sorted(keys)}")
+    if kind == "constant":
+        return Signal("constant", value=n.get("value", default_value).number())
+    if kind == "ramp":
+        return Signal("ramp", start=n.get("start", 0.0).number(), end=n.get("end", default_value).number(),
+                      t0=n.get("t0", 0.0).number(nonneg=True),
+                      duration=n.get("duration").number(positive=True, unit="s"),
+                      shape=n.get("shape", "linear").string(("linear", "smooth", "cycloidal")))
+    if kind == "sine":
+        return Signal("sine", offset=n.get("offset", 0.0).number(), amplitude=n.get("amplitude").number(),
+                      frequency=n.get("frequency").number(nonneg=True, unit="Hz"),
+                      phase=n.get("phase", 0.0).number(unit="rad"))
+    t = n.get("t").numbers(min_len=2)
+    v = n.get("values").numbers(min_len=2)
+    if len(t) != len(v):
+        raise n.fail(f"'t' has {len(t)} entries but 'values' has {len(v)}")
+    if any(b <= a for a, b in zip(t, t[1:])):
+        raise n.fail(f"'t' must be strictly increasing, got {list(t)}", "t")
+    return Signal("table", table_t=t, table_v=v)
+
+
+def _member(name: str, n: Node, materials, sections, nodes) -> Member:
+    n.mapping({"kind", "from", "to", "elements", "order", "material", "section", "up", "arc",
+               "actuator", "mass"}, {"kind", "from", "to", "material", "section"})
+    kind = n.get("kind").string(("frame", "truss", "actuator"))
+    start = n.get("from").name_in(nodes, "node")
+    end = n.get("to").name_in(nodes, "node")
+    if start == end:
+        raise n.fail(f"'from' and 'to' are the same node '{start}'")
+    if math.dist(nodes[start], nodes[end]) <= 0.0:
+        raise n.fail(f"nodes '{start}' and '{end}' coincide: a member needs a positive length")
+    actuator = None
+    if kind == "actuator":
+        a = n.get("actuator", {}).mapping({"variant", "command", "stroke"})
+        stroke = None
+        if a.has("stroke"):
+            stroke = a.get("stroke").vector(2, unit="m")
+            if not 0.0 < stroke[0] < stroke[1]:
+                raise a.fail(f"expected 0 < min < max (m), got {list(stroke)}", "stroke")
+        actuator = ActuatorSpec(a.get("variant", "frame").string(("frame", "bar")),
+                                signal(a.get("command")) if a.has("command") else None, stroke)
+    elif n.has("actuator"):
+        raise n.fail(f"only members of kind 'actuator' take an 'actuator' block (kind is '{kind}')", "actuator")
+    is_bar = kind == "truss" or (actuator is not None and actuator.variant == "bar")
+    order = n.get("order", 1 if is_bar else 3).integer(lo=1, hi=4)
+    if is_bar and order != 1:
+        raise n.fail(f"bars are 2-node elements (order 1), got order {order}", "order")
+    elements = n.get("elements", 1 if is_bar else 4).integer(lo=1, hi=10000)
+    up = n.get("up").vector(3, nonzero=True) if n.has("up") else None
+    arc = None
+    if n.has("arc"):
+        a = n.get("arc").mapping({"center"}, {"center"})
+        arc = a.get("center").vector(3, unit="m")
+        r0, r1 = math.dist(arc, nodes[start]), math.dist(arc, nodes[end])
+        if abs(r0 - r1) > 1e-9 * max(r0, r1):
+            raise a.fail(f"'{start}' and '{end}' are not equidistant from the centre ({r0} vs {r1} m)", "center")
+        if is_bar:
+            raise n.fail("arcs are for frame members", "arc")
+    mass = None
+    if n.has("mass"):
+        m = n.get("mass").mapping({"per_length", "rotary_inertia"})
+        mass = MassOverride(m.get("per_length").number(positive=True, unit="kg/m") if m.has("per_length") else None,
+                            m.get("rotary_inertia").vector(2, unit="kg·m") if m.has("rotary_inertia") else None)
+    return Member(name, kind, start, end, elements, order, n.get("material").name_in(materials, "material"),
+                  n.get("section").name_in(sections, "section"), up, arc, actuator, mass)
+
+
+def _support(n: Node, nodes, members) -> Support:
+    n.mapping({"node", "type", "member", "vector"}, {"node", "type"})
+    typ = n.get("type").string(("clamp", "ball", "fixed_vector"))
+    node = n.get("node").name_in(nodes, "node")
+    member = n.get("member").name_in(members, "member") if n.has("member") else None
+    vector = None
+    if typ == "fixed_vector":
+        if member is None:
+            raise n.fail("a fixed_vector support needs 'member' (whose section vector is fixed)")
+        vector = n.get("vector").string(("v1", "v2"))
+    elif n.has("vector"):
+        raise n.fail(f"'vector' applies to type fixed_vector only (type is '{typ}')", "vector")
+    if member is not None and node not in (members[member].start, members[member].end):
+        raise n.fail(f"node '{node}' is not an end of member '{member}'")
+    return Support(node, typ, member, vector)
+
+
+def _loads(n: Node, nodes, members):
+    n.mapping({"gravity", "forces", "moments"})
+    gravity = None
+    if n.has("gravity"):
+        g = n.get("gravity")
+        if isinstance(g.value, list):
+            gravity = Gravity(g.vector(3, unit="m/s²"), Signal())
+        else:
+            g.mapping({"acceleration", "signal"}, {"acceleration"})
+            gravity = Gravity(g.get("acceleration").vector(3, unit="m/s²"),
+                              signal(g.get("signal")) if g.has("signal") else Signal())
+    forces = []
+    for k, f in n.get("forces", {}).items():
+        f.mapping({"node", "force", "signal"}, {"node", "force"})
+        forces.append(Force(k, f.get("node").name_in(nodes, "node"), f.get("force").vector(3, unit="N"),
+                            signal(f.get("signal")) if f.has("signal") else Signal()))
+    moments = []
+    for k, m in n.get("moments", {}).items():
+        m.mapping({"node", "member", "moment", "follower", "signal"}, {"node", "member", "moment"})
+        node = m.get("node").name_in(nodes, "node")
+        member = m.get("member").name_in(members, "member")
+        mem = members[member]
+        if node not in (mem.start, mem.end):
+            raise m.fail(f"node '{node}' is not an end of member '{member}'", "node")
+        if mem.kind == "truss" or (mem.actuator is not None and mem.actuator.variant == "bar"):
+            raise m.fail(f"member '{member}' has no section vectors (bars carry no moments)", "member")
+        moments.append(Moment(k, node, member, m.get("moment").vector(3, unit="N·m"),
+                              m.get("follower", False).boolean(),
+                              signal(m.get("signal")) if m.has("signal") else Signal()))
+    return tuple(forces), tuple(moments), gravity
+
+
+def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
+    fields = {f.name for f in dataclasses.fields(SolverSpec)}
+    n.mapping(fields)
+    merged = dict(n.value)
+    merged.update({k: v for k, v in overrides.items() if v is not None})
+    n = Node(merged, n.path or "solver", n.source)
+    d = SolverSpec()
+    s = SolverSpec(
+        analysis=n.get("analysis", d.analysis).string(("dynamic", "static")),
+        integrator=n.get("integrator", d.integrator).string(("newmark", "generalized_alpha")),
+        dt=n.get("dt", d.dt).number(positive=True, unit="s"),
+        until=n.get("until", d.until).number(positive=True, unit="s"),
+        beta=n.get("beta", d.beta).number(positive=True, hi=0.5),
+        gamma=n.get("gamma", d.gamma).number(lo=0.5, hi=1.0),
+        rho_inf=n.get("rho_inf", d.rho_inf).number(lo=0.0, hi=1.0),
+        tolerance=n.get("tolerance", d.tolerance).number(positive=True, hi=1e-2),
+        max_iterations=n.get("max_iterations", d.max_iterations).integer(lo=1, hi=1000),
+        initial_acceleration=n.get("initial_acceleration", d.initial_acceleration).string(("consistent", "zero")),
+        on_unconverged=n.get("on_unconverged", d.on_unconverged).string(("substep", "stop", "accept_flagged")),
+        max_substep_levels=n.get("max_substep_levels", d.max_substep_levels).integer(lo=0, hi=12),
+        static_steps=n.get("static_steps", d.static_steps).integer(lo=1, hi=100000),
+    )
+    return s
+
+
+def _output(name: str, n: Node, nodes, members) -> Output:
+    kind = n.mapping({"kind", "node", "member", "actuator"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
+    need = OUTPUT_KINDS[kind]
+    extra = sorted(k for k in n.value if k != "kind" and k not in need)
+    if extra:
+        raise n.fail(f"key(s) {extra} do not apply to output kind '{kind}'; expected {list(need)}")
+    node = n.get("node").name_in(nodes, "node") if "node" in need else None
+    member = n.get("member").name_in(members, "member") if "member" in need else None
+    actuator = None
+    if "actuator" in need:
+        actuator = n.get("actuator").name_in(members, "member")
+        if members[actuator].kind != "actuator":
+            raise n.fail(f"member '{actuator}' is not an actuator (kind '{members[actuator].kind}')", "actuator")
+    if kind == "section_vectors":
+        mem = members[member]
+        if mem.kind == "truss" or (mem.actuator and mem.actuator.variant == "bar"):
+            raise n.fail(f"member '{member}' has no section vectors", "member")
+        if node not in (mem.start, mem.end):
+            raise n.fail(f"node '{node}' is not an end of member '{member}'", "node")
+    return Output(name, kind, node, member, actuator)

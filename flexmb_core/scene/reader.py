@@ -1,0 +1,129 @@
+"""A tiny strict reader over nested dicts: every error names ``file:key.path``, the value and
+what was expected."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..errors import SceneError
+
+_MISSING = object()
+
+
+class Node:
+    """A position in the YAML tree: the value plus its dotted path for error messages."""
+
+    def __init__(self, value: Any, path: str, source: str):
+        self.value = value
+        self.path = path
+        self.source = source
+
+    # -- errors -------------------------------------------------------------------------
+    def where(self, key: str | int | None = None) -> str:
+        p = self.path
+        if key is not None:
+            p = f"{p}[{key}]" if isinstance(key, int) else (f"{p}.{key}" if p else str(key))
+        return f"{self.source}:{p or '<root>'}"
+
+    def fail(self, message: str, key: str | int | None = None) -> SceneError:
+        return SceneError(self.where(key), message)
+
+    # -- structure ----------------------------------------------------------------------
+    def mapping(self, allowed: set[str], required: set[str] = frozenset()) -> "Node":
+        if not isinstance(self.value, dict):
+            raise self.fail(f"expected a mapping, got {type(self.value).__name__} {self.value!r}")
+        unknown = sorted(str(k) for k in self.value if k not in allowed)
+        if unknown:
+            raise self.fail(f"unknown key(s) {unknown}; allowed keys: {sorted(allowed)}")
+        missing = sorted(k for k in required if k not in self.value)
+        if missing:
+            raise self.fail(f"missing required key(s) {missing}")
+        return self
+
+    def get(self, key: str, default: Any = _MISSING) -> "Node | None":
+        if key in self.value:
+            sub = f"{self.path}.{key}" if self.path else key
+            return Node(self.value[key], sub, self.source)
+        if default is _MISSING:
+            raise self.fail(f"missing required key '{key}'")
+        return None if default is None else Node(default, f"{self.path}.{key}", self.source)
+
+    def has(self, key: str) -> bool:
+        return isinstance(self.value, dict) and key in self.value
+
+    def items(self):
+        if not isinstance(self.value, dict):
+            raise self.fail(f"expected a mapping, got {self.value!r}")
+        for k, v in self.value.items():
+            if not isinstance(k, str) or not k:
+                raise self.fail(f"names must be non-empty strings, got {k!r}")
+            yield k, Node(v, f"{self.path}.{k}" if self.path else k, self.source)
+
+    def list(self) -> list["Node"]:
+        if not isinstance(self.value, list):
+            raise self.fail(f"expected a list, got {self.value!r}")
+        return [Node(v, f"{self.path}[{i}]", self.source) for i, v in enumerate(self.value)]
+
+    # -- scalars ------------------------------------------------------------------------
+    def number(self, *, positive: bool = False, nonneg: bool = False,
+               lo: float | None = None, hi: float | None = None, unit: str = "") -> float:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.fail(f"expected a number{' in ' + unit if unit else ''}, got {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.fail(f"expected a finite number, got {v!r}")
+        if positive and v <= 0:
+            raise self.fail(f"expected a positive number{' (' + unit + ')' if unit else ''}, got {v!r}")
+        if nonneg and v < 0:
+            raise self.fail(f"expected a non-negative number, got {v!r}")
+        if lo is not None and v < lo:
+            raise self.fail(f"expected a number ≥ {lo}, got {v!r}")
+        if hi is not None and v > hi:
+            raise self.fail(f"expected a number ≤ {hi}, got {v!r}")
+        return v
+
+    def integer(self, *, lo: int | None = None, hi: int | None = None) -> int:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(f"expected an integer, got {v!r}")
+        if lo is not None and v < lo:
+            raise self.fail(f"expected an integer ≥ {lo}, got {v!r}")
+        if hi is not None and v > hi:
+            raise self.fail(f"expected an integer ≤ {hi}, got {v!r}")
+        return v
+
+    def string(self, choices: tuple[str, ...] | None = None) -> str:
+        v = self.value
+        if not isinstance(v, str) or not v:
+            raise self.fail(f"expected a non-empty string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.fail(f"expected one of {list(choices)}, got {v!r}")
+        return v
+
+    def boolean(self) -> bool:
+        if not isinstance(self.value, bool):
+            raise self.fail(f"expected true or false, got {self.value!r}")
+        return self.value
+
+    def vector(self, n: int = 3, *, nonzero: bool = False, unit: str = "") -> tuple[float, ...]:
+        v = self.value
+        if not isinstance(v, list) or len(v) != n:
+            raise self.fail(f"expected a list of {n} numbers{' (' + unit + ')' if unit else ''}, got {v!r}")
+        out = tuple(Node(x, f"{self.path}[{i}]", self.source).number() for i, x in enumerate(v))
+        if nonzero and all(x == 0.0 for x in out):
+            raise self.fail(f"expected a non-zero vector, got {v!r}")
+        return out
+
+    def numbers(self, *, min_len: int = 1) -> tuple[float, ...]:
+        v = self.value
+        if not isinstance(v, list) or len(v) < min_len:
+            raise self.fail(f"expected a list of at least {min_len} numbers, got {v!r}")
+        return tuple(Node(x, f"{self.path}[{i}]", self.source).number() for i, x in enumerate(v))
+
+    def name_in(self, table: dict, what: str) -> str:
+        name = self.string()
+        if name not in table:
+            raise self.fail(f"unknown {what} '{name}'; defined: {sorted(table)}")
+        return name

@@ -1,0 +1,164 @@
+"""Frozen dataclasses of a scene (SI units throughout: m, kg, s, N, Pa, rad)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A scalar function of time.
+
+    kinds: ``constant`` (value), ``ramp`` (start → end over [t0, t0+duration], shape linear /
+    smooth (C² quintic) / cycloidal (C², SPEC §4.2)), ``sine`` (offset + amplitude·sin(2π f t + phase)),
+    ``table`` (piecewise linear in (t, value), held outside).
+    """
+
+    kind: str = "constant"
+    value: float = 1.0
+    start: float = 0.0
+    end: float = 1.0
+    t0: float = 0.0
+    duration: float = 1.0
+    shape: str = "linear"
+    offset: float = 0.0
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    table_t: tuple[float, ...] = ()
+    table_v: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class Material:
+    name: str
+    E: float
+    nu: float
+    rho: float
+    G: float
+
+
+@dataclass(frozen=True)
+class SectionSpec:
+    name: str
+    shape: str                      # rectangle | circle | tube
+    dims: tuple[float, ...]          # rectangle (width, height); circle (radius,); tube (ro, ri)
+    torsion_constant: float | None = None
+    shear_factor: float | None = None
+
+
+@dataclass(frozen=True)
+class ActuatorSpec:
+    variant: str                     # frame | bar
+    command: Signal | None           # commanded length L(t) (m); None → hold the reference length
+    stroke: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class MassOverride:
+    per_length: float | None = None            # ρA (kg/m)
+    rotary_inertia: tuple[float, float] | None = None  # (ρI1, ρI2) (kg·m)
+
+
+@dataclass(frozen=True)
+class Member:
+    name: str
+    kind: str                        # frame | truss | actuator
+    start: str
+    end: str
+    elements: int
+    order: int
+    material: str
+    section: str
+    up: Vec3 | None
+    arc_center: Vec3 | None
+    actuator: ActuatorSpec | None
+    mass: MassOverride | None
+
+
+@dataclass(frozen=True)
+class Support:
+    node: str
+    type: str                        # clamp | ball | fixed_vector
+    member: str | None = None
+    vector: str | None = None        # v1 | v2 (fixed_vector)
+
+
+@dataclass(frozen=True)
+class Force:
+    name: str
+    node: str
+    force: Vec3
+    signal: Signal
+
+
+@dataclass(frozen=True)
+class Moment:
+    name: str
+    node: str
+    member: str
+    moment: Vec3
+    follower: bool
+    signal: Signal
+
+
+@dataclass(frozen=True)
+class PointMass:
+    name: str
+    node: str
+    mass: float
+
+
+@dataclass(frozen=True)
+class Gravity:
+    acceleration: Vec3
+    signal: Signal
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    analysis: str = "dynamic"        # dynamic | static
+    integrator: str = "newmark"      # newmark | generalized_alpha
+    dt: float = 1e-3
+    until: float = 1.0
+    beta: float = 0.25
+    gamma: float = 0.5
+    rho_inf: float = 0.9
+    tolerance: float = 1e-9
+    max_iterations: int = 25
+    initial_acceleration: str = "consistent"   # consistent | zero
+    on_unconverged: str = "substep"            # substep | stop | accept_flagged
+    max_substep_levels: int = 4
+    static_steps: int = 10
+
+
+@dataclass(frozen=True)
+class Output:
+    name: str
+    kind: str
+    node: str | None = None
+    member: str | None = None
+    actuator: str | None = None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A whole mechanism: what the compiler turns into a :class:`~flexmb_core.model.Model`."""
+
+    name: str
+    description: str
+    source: str
+    materials: dict[str, Material]
+    sections: dict[str, SectionSpec]
+    nodes: dict[str, Vec3]
+    members: dict[str, Member]
+    supports: tuple[Support, ...]
+    forces: tuple[Force, ...]
+    moments: tuple[Moment, ...]
+    point_masses: tuple[PointMass, ...]
+    gravity: Gravity | None
+    mass_damping: float
+    solver: SolverSpec
+    outputs: tuple[Output, ...] = field(default_factory=tuple)

@@ -1,0 +1,164 @@
+"""The facade: ``Simulator(model)`` → ``initialize()`` → ``step()`` / ``run()``.
+
+It owns the :class:`State`, the :class:`Workspace` and the integrator, evaluates actuator
+commands (scene signals, or lengths set from outside with :meth:`set_commands`) and keeps
+solver statistics. It never prints.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .errors import ConvergenceError, FlexmbError
+from .integrators.dynamic import DynamicIntegrator
+from .integrators.static import StaticSolver
+from .model.assembly import assemble
+from .model.model import Model
+from .model.workspace import State, Workspace
+from .observers import evaluate_output
+from .scene.schema import SolverSpec
+from .signals import evaluate
+from .solvers.result import StepResult
+
+
+@dataclass
+class RunStats:
+    """Counters over a run (what ``flexmb run --json`` reports)."""
+
+    steps: int = 0
+    iterations: list[int] = field(default_factory=list)
+    unconverged_steps: int = 0
+    substepped_steps: int = 0
+    wall_time_s: float = 0.0
+    max_residual: float = 0.0
+
+
+class Simulator:
+    """Time stepping of one compiled model."""
+
+    def __init__(self, model: Model, spec: SolverSpec | None = None):
+        self.model = model
+        self.spec = spec or model.scene.solver
+        self.ws = Workspace(model)
+        self.state = State.at_rest(model)
+        self._override: np.ndarray | None = None
+        self.stats = RunStats()
+        self.last: StepResult | None = None
+        if self.spec.analysis == "static":
+            self._static = StaticSolver(model, self.ws, self.spec)
+            self._dynamic = None
+        else:
+            self._dynamic = DynamicIntegrator(model, self.ws, self.spec)
+            self._static = None
+
+    # -- commands -------------------------------------------------------------------------
+    def command_lengths(self, t: float) -> np.ndarray:
+        """Commanded actuator lengths (m) at ``t``: the external override if set, else the scene."""
+        act = self.model.actuators
+        if self._override is not None:
+            return self._override.copy()
+        return np.array([act.l0[i] if s is None else evaluate(s, t) for i, s in enumerate(act.commands)])
+
+    def set_commands(self, lengths: np.ndarray | None) -> None:
+        """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals."""
+        if lengths is None:
+            self._override = None
+            return
+        lengths = np.asarray(lengths, dtype=float)
+        act = self.model.actuators
+        if lengths.shape != act.l0.shape:
+            raise FlexmbError(f"expected {act.l0.size} actuator lengths ({list(act.names)}), got shape {lengths.shape}")
+        if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
+            raise FlexmbError(f"actuator lengths must be finite and positive, got {lengths.tolist()}")
+        self._override = lengths.copy()
+
+    # -- stepping -------------------------------------------------------------------------
+    def warmup(self) -> float:
+        """Compile (or load from cache) every kernel this model uses; returns seconds spent."""
+        t0 = time.perf_counter()
+        st = self.state.copy()
+        assemble(self.model, self.ws, st.q, st.lam, True)
+        assemble(self.model, self.ws, st.q, st.lam, False)
+        from .observers import actuator_forces
+        if self.model.actuators.l0.size:
+            actuator_forces(self.model, self.ws, st)
+        return time.perf_counter() - t0
+
+    def initialize(self) -> StepResult:
+        """Apply the commands at t = 0 and (dynamics) compute the initial acceleration."""
+        self.state.lam[:] = self.command_lengths(self.state.t) / self.model.actuators.l0
+        if self._dynamic is not None:
+            self.last = self._dynamic.initialize(self.state)
+        else:
+            self.last = self._static.solve_at(self.state, self.state.t, self.state.lam)
+        return self.last
+
+    def step(self, dt: float | None = None) -> StepResult:
+        """Advance by ``dt`` (default: the scene's). Raises :class:`ConvergenceError` when the
+        step fails and the policy is ``stop`` or ``substep``; ``accept_flagged`` returns the flagged result."""
+        dt = self.spec.dt if dt is None else dt
+        t_new = self.state.t + dt
+        lam = self.command_lengths(t_new) / self.model.actuators.l0
+        t0 = time.perf_counter()
+        if self._dynamic is not None:
+            res = self._dynamic.step(self.state, dt, lam)
+        else:
+            res = self._static.solve_at(self.state, t_new, lam)
+        self.stats.wall_time_s += time.perf_counter() - t0
+        self.stats.steps += 1
+        self.stats.iterations.append(res.iterations)
+        if res.substeps > 1:
+            self.stats.substepped_steps += 1
+        self.last = res
+        if not res.converged:
+            self.stats.unconverged_steps += 1
+            if self.spec.on_unconverged != "accept_flagged":
+                raise ConvergenceError(f"step to t = {t_new:.6g} s did not converge: {res.message}", res)
+        else:
+            self.stats.max_residual = max(self.stats.max_residual, res.residual)
+        return res
+
+    def run(self, until: float, dt: float | None = None,
+            callback: Callable[["Simulator", StepResult], None] | None = None) -> RunStats:
+        """Step until ``t ≥ until`` (the last step is shortened to land on it)."""
+        dt = self.spec.dt if dt is None else dt
+        while self.state.t < until - 1e-12 * max(1.0, until):
+            h = min(dt, until - self.state.t)
+            res = self.step(h)
+            if callback is not None:
+                callback(self, res)
+        return self.stats
+
+    # -- outputs --------------------------------------------------------------------------
+    def energy(self) -> dict:
+        r = self.last
+        if r is None:
+            return {}
+        return {"kinetic": r.kinetic, "strain": r.strain, "gravity": r.gravity, "total": r.total_energy}
+
+    def outputs(self) -> dict:
+        """Current values of every output the scene declares."""
+        e = self.energy()
+        return {o.name: evaluate_output(self.model, self.ws, self.state, o, e) for o in self.model.scene.outputs}
+
+    def summary(self) -> dict:
+        """Run statistics with the JSON keys of ``flexmb run --json``."""
+        it = self.stats.iterations
+        wall = self.stats.wall_time_s
+        return {
+            "steps": self.stats.steps,
+            "sim_time_s": self.state.t,
+            "wall_time_s": wall,
+            "rtf": (self.state.t / wall) if wall > 0 else math.inf,
+            "steps_per_s": (self.stats.steps / wall) if wall > 0 else math.inf,
+            "newton_iterations_mean": float(np.mean(it)) if it else 0.0,
+            "newton_iterations_max": int(max(it)) if it else 0,
+            "unconverged_steps": self.stats.unconverged_steps,
+            "substepped_steps": self.stats.substepped_steps,
+            "max_relative_residual": self.stats.max_residual,
+        }

@@ -1,0 +1,1 @@
+"""Newton–Raphson building blocks and the sparse linear solve on the fixed pattern."""
