@@ -67,6 +67,11 @@ def member_geometry(mem: Member, nodes: dict) -> tuple[np.ndarray, np.ndarray, n
     return x, t, v1, v2
 
 
+def member_length(x: np.ndarray) -> float:
+    """Polyline length through the member's nodes (m)."""
+    return float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1)))
+
+
 def compile_scene(scene: Scene) -> Model:
     """Build the read-only :class:`Model` of a validated scene."""
     mats = scene.materials
@@ -106,7 +111,20 @@ def compile_scene(scene: Scene) -> Model:
         m = x.shape[0]
         ids = np.empty(m, dtype=np.int64)
         ids[0], ids[-1] = node_lookup[mem.start], node_lookup[mem.end]
+        via_at = {}
+        for v in mem.via:
+            dist = np.linalg.norm(x - np.asarray(scene.nodes[v]), axis=1)
+            k = int(np.argmin(dist))
+            if dist[k] > 1e-9 * member_length(x) or k in (0, m - 1):
+                raise SceneError(f"{scene.source}:members.{mem.name}.via",
+                                 f"node '{v}' is not at an interior element node of the member (closest "
+                                 f"node {dist[k]:.3g} m away); choose 'elements' so that an element "
+                                 "boundary falls on it")
+            via_at[k] = node_lookup[v]
         for k in range(1, m - 1):
+            if k in via_at:
+                ids[k] = via_at[k]
+                continue
             name = f"{mem.name}/{k}"
             node_lookup[name] = len(node_names)
             node_names.append(name)
@@ -125,8 +143,7 @@ def compile_scene(scene: Scene) -> Model:
                 vd[k] = take(np.concatenate((v1[k], v2[k])), 1) + np.arange(6)
         if mem.kind == "actuator" and mem.arc_center is not None:
             raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
-        member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd,
-                                       float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1)))))
+        member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
     unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
     if unused:
         raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member")
@@ -184,8 +201,10 @@ def compile_scene(scene: Scene) -> Model:
         act = act_lookup.get(mem.name, -1)
         x, _, v1, v2 = member_geom[mem.name]
         if info.vdofs[0, 0] >= 0:
-            n_axial = mem.order + 2
-            key = (mem.order, sec.points.shape[0])
+            # Reduced rule (p Gauss points) is free of shear and membrane locking: thin members
+            # bent into arcs converge with few elements; "full" (p + 2) is kept for comparison.
+            n_axial = mem.order if mem.integration == "reduced" else mem.order + 2
+            key = (mem.order, n_axial, sec.points.shape[0])
             row = np.array([mat.E, mat.E, mat.G, mat.G, sec.torsion / sec.polar, sec.shear_factor])
             iscale = None
             if mem.mass is not None:
@@ -198,7 +217,10 @@ def compile_scene(scene: Scene) -> Model:
                 iscale = np.tile(iscale, mem.order + 1)
             for e in range(mem.elements):
                 k = slice(e * mem.order, e * mem.order + mem.order + 1)
-                dax, dsec, w, psi = frame_element_geometry(x[k], v1[k], v2[k], mem.order, n_axial, sec.points)
+                dax, dsec, w, _ = frame_element_geometry(x[k], v1[k], v2[k], mem.order, n_axial, sec.points)
+                # The mass needs an exact rule whatever the stiffness rule: φℓφm has degree 2p.
+                _, _, w_m, psi = frame_element_geometry(x[k], v1[k], v2[k], mem.order, mem.order + 1,
+                                                        sec.points)
                 edofs = np.concatenate([np.concatenate((info.ydofs[j], info.vdofs[j]))
                                         for j in range(k.start, k.stop)])
                 b = frame_build[key]
@@ -209,7 +231,7 @@ def compile_scene(scene: Scene) -> Model:
                 b["mat"].append(row)
                 b["act"].append(act)
                 b["member"].append(mi_id)
-                me = frame_element_mass(psi, w, mat.rho, iscale)
+                me = frame_element_mass(psi, w_m, mat.rho, iscale)
                 mass_rows.append(np.repeat(edofs, edofs.size))
                 mass_cols.append(np.tile(edofs, edofs.size))
                 mass_vals.append(me.ravel())
@@ -265,7 +287,7 @@ def compile_scene(scene: Scene) -> Model:
         return out
 
     groups = []
-    for (order, nsec), b in sorted(frame_build.items()):
+    for (order, _, nsec), b in sorted(frame_build.items()):
         edofs = np.asarray(b["edofs"], dtype=np.int64)
         g = FrameGroup(order, nsec, edofs, np.ascontiguousarray(b["dax"]), np.ascontiguousarray(b["dsec"]),
                        np.ascontiguousarray(b["w"]), np.ascontiguousarray(b["mat"], dtype=float),

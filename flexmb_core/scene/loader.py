@@ -162,7 +162,7 @@ def signal(n: Node, *, default_value: float = 1.0) -> Signal:
 
 def _member(name: str, n: Node, materials, sections, nodes) -> Member:
     n.mapping({"kind", "from", "to", "elements", "order", "material", "section", "up", "arc",
-               "actuator", "mass"}, {"kind", "from", "to", "material", "section"})
+               "actuator", "mass", "integration", "via"}, {"kind", "from", "to", "material", "section"})
     kind = n.get("kind").string(("frame", "truss", "actuator"))
     start = n.get("from").name_in(nodes, "node")
     end = n.get("to").name_in(nodes, "node")
@@ -202,8 +202,14 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
         m = n.get("mass").mapping({"per_length", "rotary_inertia"})
         mass = MassOverride(m.get("per_length").number(positive=True, unit="kg/m") if m.has("per_length") else None,
                             m.get("rotary_inertia").vector(2, unit="kg·m") if m.has("rotary_inertia") else None)
+    via = ()
+    if n.has("via"):
+        via = tuple(v.name_in(nodes, "node") for v in n.get("via").list())
+        if start in via or end in via or len(set(via)) != len(via):
+            raise n.fail(f"'via' must list distinct interior nodes, got {list(via)}", "via")
     return Member(name, kind, start, end, elements, order, n.get("material").name_in(materials, "material"),
-                  n.get("section").name_in(sections, "section"), up, arc, actuator, mass)
+                  n.get("section").name_in(sections, "section"), up, arc, actuator, mass,
+                  n.get("integration", "reduced").string(("reduced", "full")), via)
 
 
 def _support(n: Node, nodes, members) -> Support:

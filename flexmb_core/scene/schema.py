@@ -76,6 +76,8 @@ class Member:
     arc_center: Vec3 | None
     actuator: ActuatorSpec | None
     mass: MassOverride | None
+    integration: str = "reduced"     # reduced (p Gauss points along the axis) | full (p + 2)
+    via: tuple[str, ...] = ()        # named nodes the member passes through (continuous vectors)
 
 
 @dataclass(frozen=True)
