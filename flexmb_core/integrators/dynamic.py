@@ -6,6 +6,10 @@ Unknowns at t_{n+1}: q. With the pseudo-acceleration ã,
     a(q) = ((1−αm) ã(q) + αm ã_n − αf a_n) / (1−αf),   v(q) = v_n + Δt[(1−γ) ã_n + γ ã(q)]
     residual  r(q) = f_int(q; λ_{n+1}) + M (a + c_m v) − f_ext(t_{n+1})
     tangent   K + (c_a + c_m c_v) M,  c_a = (1−αm)/((1−αf) β Δt²),  c_v = γ/(β Δt)
+
+Newton is either full (tangent every iteration) or modified: the factorization is kept across
+iterations and steps while each increment shrinks by at least ``modified_contraction``, and is
+refreshed when it does not, when Δt changes, or after ``tangent_max_age`` steps.
 """
 
 from __future__ import annotations
@@ -50,10 +54,14 @@ class DynamicIntegrator:
         self._backup = None
         self._free = model.free
         self._inv_scale = 1.0 / model.dof_scale[model.free]
+        self._factored_coef: float | None = None   # tangent coefficient of the held factorization
+        self._tangent_age = 0                       # steps since the last tangent refresh
+        self.tangent_updates = 0
 
     # -- start ------------------------------------------------------------------------------
     def initialize(self, state: State) -> StepResult:
         """Consistent initial acceleration ``M_ff a_f = (f_ext − f_int − C v)_f`` (or zero)."""
+        self._factored_coef = None
         m, ws = self.model, self.ws
         update_load_scales(m, ws, state.t)
         strain = assemble(m, ws, state.q, state.lam, False)
@@ -131,23 +139,32 @@ class DynamicIntegrator:
         rel = math.inf
         message = ""
         it = 0
+        modified = spec.newton == "modified"
+        refresh = (not modified or self._factored_coef != coef
+                   or self._tangent_age >= spec.tangent_max_age)
+        prev_inc = math.inf
         for it in range(1, spec.max_iterations + 1):
             atil = (q - q_hat) / (beta * dt * dt)
             a = ((1.0 - am) * atil + am * at_n - af * a_n) / (1.0 - af)
             v = v_n + dt * ((1.0 - gamma) * at_n + gamma * atil)
-            assemble(m, ws, q, state.lam, True)
+            assemble(m, ws, q, state.lam, refresh)
             csr_matvec(*m.mass_csr, a + c_m * v, self._ma)
             r = ws.r + self._ma - ws.f_ext
             rf = r[free]
             if not np.all(np.isfinite(rf)):
                 message = f"non-finite residual at Newton iteration {it}"
                 break
-            np.add(ws.kdata, coef * m.mass_kdata, out=ws.keff)
-            try:
-                self.lu.factor(ws.keff)
-            except RuntimeError as exc:
-                message = f"singular tangent at Newton iteration {it} ({exc})"
-                break
+            if refresh:
+                np.add(ws.kdata, coef * m.mass_kdata, out=ws.keff)
+                try:
+                    self.lu.factor(ws.keff)
+                except RuntimeError as exc:
+                    self._factored_coef = None
+                    message = f"singular tangent at Newton iteration {it} ({exc})"
+                    break
+                self._factored_coef = coef
+                self._tangent_age = 0
+                self.tangent_updates += 1
             dq = self.lu.solve(-rf)
             q[free] += dq
             inc = float(np.max(np.abs(dq) * self._inv_scale)) if dq.size else 0.0
@@ -159,6 +176,9 @@ class DynamicIntegrator:
             if inc <= spec.tolerance:
                 converged = True
                 break
+            # Modified Newton keeps the factorization while it contracts fast; otherwise refresh.
+            refresh = not modified or inc > spec.modified_contraction * prev_inc
+            prev_inc = inc
         if not converged and not message:
             message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e}, tolerance {spec.tolerance:.1e})"
         atil = (q - q_hat) / (beta * dt * dt)
@@ -167,7 +187,9 @@ class DynamicIntegrator:
         state.atil[:] = atil
         state.t = t_new
         if not converged:
+            self._factored_coef = None   # a failed step never leaves a stale tangent behind
             return StepResult(False, it, rel, inc, 1, message=message)
+        self._tangent_age += 1
         strain = assemble(m, ws, q, state.lam, False)
         csr_matvec(*m.mass_csr, state.a + c_m * state.v, self._ma)
         r = (ws.r + self._ma - ws.f_ext)[free]

@@ -134,6 +134,9 @@ class SolverSpec:
     on_unconverged: str = "substep"            # substep | stop | accept_flagged
     max_substep_levels: int = 4
     static_steps: int = 10
+    newton: str = "full"                       # full | modified (tangent reuse)
+    modified_contraction: float = 0.25         # refresh when |Δq_k| > this · |Δq_k−1|
+    tangent_max_age: int = 100                 # steps a held tangent may serve
 
 
 @dataclass(frozen=True)

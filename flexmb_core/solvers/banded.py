@@ -3,34 +3,41 @@
 Every Newton iteration factors ``A = K + c M`` on the same CSR pattern, so everything that depends
 only on the pattern is done once, in :class:`SkylineLU`'s constructor:
 
-1. **Ordering.** Several permutations are tried and the one with the smallest estimated factor
-   cost is kept: the given numbering, reverse Cuthill–McKee (``scipy.sparse.csgraph``) and
-   "arrowhead" orderings, where the DOFs of high-degree nodes (the joints where several chains meet,
-   e.g. the platform vertices of a Stewart platform) are numbered last and each remaining chain is
-   numbered by RCM, oriented so that its end next to a joint comes last. For a chain RCM is already
-   optimal; for chains that meet at joints RCM interleaves the chains (its level sets cross all legs
-   at once) and the arrowhead ordering is several times cheaper.
-2. **Storage.** Row ``i`` of the permuted matrix has envelope ``[first[i], i]``. ``L`` (unit lower)
-   row ``i`` and ``U`` column ``i`` (diagonal included) are stored next to each other:
-   ``L[i, k] = env[lbase[i] + k]`` and ``U[k, i] = env[ubase[i] + k]`` for ``first[i] <= k``.
-   The envelope holds the full fill of an LU without pivoting.
-3. **Symbolic factorization.** The exact structure of each row of ``L`` (the row subtree of the
-   elimination tree) is stored as runs of consecutive columns (``seg_lo[s]:seg_hi[s]`` for
-   ``s`` in ``seg_ptr[i]:seg_ptr[i+1]``). Within a chain a row is one run; the row of a joint
-   has one run per chain it touches, and the structural zeros between the runs are never computed,
-   so joints cost what the true fill costs, not what their (wide) envelope would.
-4. **Scatter map.** ``slot[p]`` is the position in ``env`` of CSR data entry ``p``.
+1. **Ordering.** Several permutations are tried and the one with the fewest factor multiply–adds
+   is kept: the given numbering, scipy's reverse Cuthill–McKee, RCM started from a
+   pseudo-peripheral vertex (George–Liu), and "arrowhead" orderings where the DOFs of high-degree
+   nodes (joints where several chains meet, e.g. the platform vertices of a Stewart platform) are
+   numbered last and each remaining chain is numbered by RCM, oriented so that its end next to a
+   joint comes last. scipy's RCM starts from a minimum-degree vertex, which on a chain of elements
+   can be in the middle (the front then runs both ways: twice the bandwidth); on chains that meet
+   at joints RCM interleaves the chains, and the arrowhead ordering needs 10–40 % fewer operations
+   on Stewart-platform patterns.
+2. **Storage.** Row ``i`` of the permuted matrix holds ``L[i, f_i:i]`` and ``U[i, i:e_i+1]``
+   contiguously, ``env[base[i] + j]`` for ``f_i <= j <= e_i`` (variable-band row storage). For a
+   structurally symmetric pattern this envelope contains all the fill of an LU without pivoting.
+3. **Symbolic factorization.** The exact structure of each row of ``L`` and of ``U`` is stored as
+   runs of consecutive columns. Inside a chain a row is one run; the row of a joint has one run per
+   chain it touches, and the zeros between the runs are never touched — joints cost their true
+   fill, not their (wide) envelope.
+4. **Blocks.** Consecutive pivots with nested structure (``struct(k) = {k+1} ∪ struct(k+1)``, e.g.
+   the DOFs of a node or of an element interior) are grouped by up to four, so the Schur
+   complement update is a rank-4 update of two contiguous rows at a time (≈ 1.5× faster than
+   rank-1 updates on chains).
+5. **Scatter map.** ``slot[p]`` is the position in ``env`` of CSR data entry ``p``.
 
-:meth:`SkylineLU.factor` then zeroes the structural entries, scatters the CSR values and runs a
-row-by-row Doolittle factorization whose inner products are contiguous in memory; its cost is the
-sum over the factor entries of the overlap of their two envelopes (≈ Σ width² for a chain).
+:meth:`SkylineLU.factor` zeroes the structural entries, scatters the CSR values and runs a blocked
+right-looking LU; its cost is ``Σ_k |struct(k)|²`` (≈ Σ width² for a chain).
 :meth:`SkylineLU.solve` does the permuted forward and back substitution without allocating.
 
 No pivoting is done. That is backward stable for symmetric positive definite and diagonally
-dominant matrices; for symmetric indefinite or non-symmetric matrices it is safe as long as no
-pivot becomes small — the factor reports the smallest pivot (:attr:`SkylineLU.min_pivot_ratio`)
-and raises :class:`SingularPivotError` on a (near-)zero or non-finite pivot so the caller can fall
-back to a pivoting solver (scipy's ``splu``).
+dominant matrices; for symmetric indefinite or non-symmetric matrices it is accurate only while
+no pivot becomes small relative to the entries it eliminates — :attr:`SkylineLU.min_pivot_ratio`
+reports the smallest pivot and :class:`SingularPivotError` is raised on a (near-)zero or
+non-finite pivot, so the caller can fall back to a pivoting solver (scipy's ``splu``).
+
+The envelope of a joint row spans every chain numbered before it, so :attr:`SkylineLU.profile_size`
+(memory) is ~10× the factor's non-zeros on Stewart patterns; that memory is zeroed once and never
+touched again (structural zeros are skipped), so it costs no time.
 """
 
 from __future__ import annotations
@@ -38,15 +45,16 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
-from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import FlexmbError
 
 __all__ = ["SkylineLU", "SingularPivotError", "NotFactoredError"]
 
-# Floating-point flags for the hot kernels: reassociation lets LLVM vectorize the inner products,
+# Floating-point flags of the hot kernels: reassociation lets LLVM vectorize the inner products,
 # contraction allows FMA. No "nnan"/"ninf", so the non-finite pivot test stays valid.
 _FASTMATH = {"reassoc", "contract"}
+_MAX_BLOCK = 4
 
 
 class SingularPivotError(FlexmbError, RuntimeError):
@@ -70,55 +78,229 @@ class SingularPivotError(FlexmbError, RuntimeError):
         self.step = int(step)
         self.pivot = float(pivot)
         self.threshold = float(threshold)
+        what = "not finite" if not np.isfinite(self.pivot) else f"too small (|pivot| <= {self.threshold:.3g})"
         super().__init__(
-            f"LU without pivoting: pivot {self.pivot:.6g} at elimination step {self.step} "
-            f"(matrix row {self.row}) is {'not finite' if not np.isfinite(self.pivot) else 'too small'}"
-            f" (threshold |pivot| > {self.threshold:.3g}); the matrix is singular, or needs pivoting — "
-            f"fall back to a pivoting solver such as scipy.sparse.linalg.splu")
+            f"LU without pivoting: pivot {self.pivot:.6g} of matrix row {self.row} (elimination step "
+            f"{self.step}) is {what}; the matrix is singular or needs pivoting — fall back to a "
+            f"pivoting solver such as scipy.sparse.linalg.splu")
 
 
 class NotFactoredError(FlexmbError, RuntimeError):
-    """``solve`` was called before a successful ``factor``."""
+    """``solve`` was called without a successful ``factor``."""
 
 
 # ---------------------------------------------------------------------------------------------
-# Pattern analysis (run once per pattern)
+# Orderings (run once per pattern)
 # ---------------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _symbolic(n, ptr, idx):
-    """Envelope and exact row structure of ``L`` for a structurally symmetric pattern.
+def _cuthill_mckee(ptr, idx, active):
+    """Cuthill–McKee order of the active subgraph, each component from a pseudo-peripheral vertex.
 
     Parameters
     ----------
-    n : int
-        Matrix size.
-    ptr : int64 (n + 1,)
-        CSR row pointer of the (symmetrized, permuted) pattern.
-    idx : int64 (nnz,)
-        CSR column indices, any order within a row.
+    ptr, idx : int64 (n + 1,), (nnz,)
+        Symmetric CSR pattern (sorted indices).
+    active : bool (n,)
+        Vertices to order.
 
     Returns
     -------
-    first : int64 (n,)
-        First column of the envelope of row ``i`` (``first[i] <= i``).
-    seg_ptr : int64 (n + 1,)
-        Runs of row ``i`` of ``L`` are ``seg_ptr[i]:seg_ptr[i+1]``.
-    seg_lo, seg_hi : int64 (nseg,)
-        Run ``s`` covers columns ``seg_lo[s] <= k < seg_hi[s]`` (all ``< i``).
+    order : int64 (n_active,)
+        Cuthill–McKee order (reverse it for RCM); components are contiguous.
+    comp_ptr : int64 (n_comp + 1,)
+        Component ``c`` is ``order[comp_ptr[c]:comp_ptr[c+1]]``.
     """
-    parent = np.full(n, -1, np.int64)
-    ancestor = np.full(n, -1, np.int64)
-    first = np.arange(n).astype(np.int64)
-    # elimination tree (Liu), with path compression through `ancestor`
+    n = ptr.shape[0] - 1
+    deg = np.zeros(n, np.int64)
+    nact = 0
+    for v in range(n):
+        if active[v]:
+            nact += 1
+            for p in range(ptr[v], ptr[v + 1]):
+                u = idx[p]
+                if u != v and active[u]:
+                    deg[v] += 1
+    mark = np.full(n, -1, np.int64)
+    placed = np.zeros(n, np.bool_)
+    queue = np.empty(n, np.int64)
+    order = np.empty(nact, np.int64)
+    comp_ptr = np.zeros(nact + 1, np.int64)
+    tmp = np.empty(n, np.int64)
+    stamp = 0
+    pos = 0
+    ncomp = 0
+    seeds = np.argsort(deg, kind="mergesort")
+    for s in seeds:
+        if not active[s] or placed[s]:
+            continue
+        # George–Liu pseudo-peripheral vertex: breadth-first level structures, restarted from a
+        # minimum-degree vertex of the last level while they get deeper
+        r = s
+        h = 0
+        cand = s
+        while True:
+            stamp += 1
+            queue[0] = cand
+            mark[cand] = stamp
+            head = 0
+            tail = 1
+            hc = 0
+            last = 0
+            while head < tail:
+                last = head
+                level_end = tail
+                hc += 1
+                while head < level_end:
+                    v = queue[head]
+                    head += 1
+                    for p in range(ptr[v], ptr[v + 1]):
+                        u = idx[p]
+                        if active[u] and mark[u] != stamp:
+                            mark[u] = stamp
+                            queue[tail] = u
+                            tail += 1
+            if hc <= h:
+                break
+            r = cand
+            h = hc
+            cand = queue[last]
+            for q in range(last + 1, tail):
+                if deg[queue[q]] < deg[cand]:
+                    cand = queue[q]
+        # Cuthill–McKee from r: neighbours by increasing degree (ties by index)
+        order[pos] = r
+        placed[r] = True
+        head = pos
+        pos += 1
+        while head < pos:
+            v = order[head]
+            head += 1
+            m = 0
+            for p in range(ptr[v], ptr[v + 1]):
+                u = idx[p]
+                if active[u] and not placed[u]:
+                    placed[u] = True
+                    tmp[m] = u
+                    m += 1
+            srt = np.argsort(deg[tmp[:m]], kind="mergesort")
+            for q in range(m):
+                order[pos] = tmp[srt[q]]
+                pos += 1
+        ncomp += 1
+        comp_ptr[ncomp] = pos
+    return order, comp_ptr[:ncomp + 1].copy()
+
+
+def _rcm_pseudo_peripheral(sym: sp.csr_matrix) -> np.ndarray:
+    order, _ = _cuthill_mckee(sym.indptr, sym.indices, np.ones(sym.shape[0], np.bool_))
+    return order[::-1].copy()
+
+
+def _arrowhead_ordering(sym: sp.csr_matrix, is_sep: np.ndarray) -> np.ndarray:
+    """Components of the graph without the separator DOFs by RCM, each oriented so that its
+    separator-side end comes last, components touching fewest separator DOFs first; separator
+    DOFs last, sorted by their first neighbour."""
+    n = sym.shape[0]
+    order, comp_ptr = _cuthill_mckee(sym.indptr, sym.indices, ~is_sep)
+    sep_idx = np.flatnonzero(is_sep)
+    sep_adj = np.asarray(sym[:, sep_idx].getnnz(axis=1)) > 0             # (n,)
+    comps = []
+    for c in range(comp_ptr.size - 1):
+        seq = order[comp_ptr[c]:comp_ptr[c + 1]][::-1]                      # RCM of the component
+        adj_pos = np.flatnonzero(sep_adj[seq])
+        if adj_pos.size and adj_pos.mean() < 0.5 * (seq.size - 1):
+            seq = seq[::-1]
+        comps.append((int(sep_adj[seq].sum()), c, seq))
+    comps.sort(key=lambda t: t[:2])
+    head = np.concatenate([t[2] for t in comps])
+    pos = np.full(n, n, np.int64)
+    pos[head] = np.arange(head.size)
+    first_nb = np.array([pos[sym.indices[sym.indptr[s]:sym.indptr[s + 1]]].min() for s in sep_idx],
+                        dtype=np.int64)
+    return np.concatenate((head, sep_idx[np.lexsort((sep_idx, first_nb))])).astype(np.int64)
+
+
+def _candidate_orderings(sym: sp.csr_matrix, which: str):
+    """Yield ``(name, perm)``; ``perm[i]`` is the original index of the ``i``-th unknown."""
+    n = sym.shape[0]
+    if which in ("auto", "natural"):
+        yield "natural", np.arange(n, dtype=np.int64)
+    if which in ("auto", "rcm"):
+        yield "rcm", _rcm_pseudo_peripheral(sym)
+    if which == "auto":
+        yield "scipy-rcm", reverse_cuthill_mckee(sym, symmetric_mode=True).astype(np.int64)
+        deg = np.diff(sym.indptr)
+        for tried, d in enumerate(np.unique(deg)[::-1][1:]):
+            is_sep = deg > d          # DOFs of nodes shared by more elements than chain nodes are
+            if is_sep.sum() > 0.25 * n or tried == 6:
+                break
+            yield f"arrowhead(degree>{d})", _arrowhead_ordering(sym, is_sep)
+
+
+# ---------------------------------------------------------------------------------------------
+# Symbolic factorization (run once per candidate ordering)
+# ---------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _to_runs(ptr, idx):
+    """Compress sorted CSR rows into runs of consecutive columns.
+
+    Parameters
+    ----------
+    ptr, idx : int64 (n + 1,), (nnz,)
+
+    Returns
+    -------
+    run_ptr : int64 (n + 1,)
+    run_lo, run_hi : int64 (nrun,)
+        Row ``i`` is the union of ``[run_lo[s], run_hi[s])`` for ``s`` in ``run_ptr[i]:run_ptr[i+1]``.
+    """
+    n = ptr.shape[0] - 1
+    nrun = 0
     for i in range(n):
         for p in range(ptr[i], ptr[i + 1]):
-            k = idx[p]
-            if k < first[i]:
-                first[i] = k
-            if k >= i:
+            if p == ptr[i] or idx[p] != idx[p - 1] + 1:
+                nrun += 1
+    run_ptr = np.zeros(n + 1, np.int64)
+    run_lo = np.empty(nrun, np.int64)
+    run_hi = np.empty(nrun, np.int64)
+    s = -1
+    for i in range(n):
+        for p in range(ptr[i], ptr[i + 1]):
+            if p == ptr[i] or idx[p] != idx[p - 1] + 1:
+                s += 1
+                run_lo[s] = idx[p]
+            run_hi[s] = idx[p] + 1
+        run_ptr[i + 1] = s + 1
+    return run_ptr, run_lo, run_hi
+
+
+@njit(cache=True)
+def _symbolic(ptr, idx):
+    """Exact structure of ``L`` (strictly lower) and ``U`` (strictly upper) of ``A = L U``.
+
+    Parameters
+    ----------
+    ptr, idx : int64 (n + 1,), (nnz,)
+        Structurally symmetric CSR pattern of the permuted matrix (any order within a row).
+
+    Returns
+    -------
+    lptr, lidx : int64 (n + 1,), (nnz_l,)
+        Columns ``j < i`` of row ``i`` of ``L``, sorted.
+    uptr, uidx : int64 (n + 1,), (nnz_l,)
+        Columns ``j > i`` of row ``i`` of ``U``, sorted (the transpose of the ``L`` structure).
+    """
+    n = ptr.shape[0] - 1
+    parent = np.full(n, -1, np.int64)
+    ancestor = np.full(n, -1, np.int64)
+    # elimination tree (Liu), path compression through `ancestor`
+    for i in range(n):
+        for p in range(ptr[i], ptr[i + 1]):
+            r = idx[p]
+            if r >= i:
                 continue
-            r = k
             while ancestor[r] != -1 and ancestor[r] != i:
                 nxt = ancestor[r]
                 ancestor[r] = i
@@ -126,75 +308,84 @@ def _symbolic(n, ptr, idx):
             if ancestor[r] == -1:
                 ancestor[r] = i
                 parent[r] = i
-    # row structures: the path from each k < i in row i up the tree to i
+    # row i of L = union of the tree paths from each k < i in row i of A up to i (two passes)
     mark = np.full(n, -1, np.int64)
-    buf = np.empty(n, np.int64)
-    seg_ptr = np.zeros(n + 1, np.int64)
-    cap = 4 * n + 16
-    seg_lo = np.empty(cap, np.int64)
-    seg_hi = np.empty(cap, np.int64)
-    nseg = 0
+    lptr = np.zeros(n + 1, np.int64)
+    lidx = np.empty(0, np.int64)
+    for sweep in range(2):
+        if sweep == 1:
+            lidx = np.empty(lptr[n], np.int64)
+        mark[:] = -1
+        for i in range(n):
+            cnt = 0
+            mark[i] = i
+            for p in range(ptr[i], ptr[i + 1]):
+                r = idx[p]
+                if r >= i:
+                    continue
+                while mark[r] != i:
+                    mark[r] = i
+                    if sweep == 1:
+                        lidx[lptr[i] + cnt] = r
+                    cnt += 1
+                    r = parent[r]
+            if sweep == 0:
+                lptr[i + 1] = lptr[i] + cnt
+            else:
+                lidx[lptr[i]:lptr[i + 1]] = np.sort(lidx[lptr[i]:lptr[i + 1]])
+    # transpose (counting sort keeps columns sorted)
+    uptr = np.zeros(n + 1, np.int64)
+    for p in range(lptr[n]):
+        uptr[lidx[p] + 1] += 1
     for i in range(n):
-        cnt = 0
-        mark[i] = i
-        for p in range(ptr[i], ptr[i + 1]):
-            r = idx[p]
-            if r >= i:
-                continue
-            while mark[r] != i:
-                mark[r] = i
-                buf[cnt] = r
-                cnt += 1
-                r = parent[r]
-        cols = np.sort(buf[:cnt])
-        j = 0
-        while j < cnt:
-            lo = cols[j]
-            while j + 1 < cnt and cols[j + 1] == cols[j] + 1:
-                j += 1
-            if nseg == cap:
-                cap *= 2
-                seg_lo = np.concatenate((seg_lo, np.empty(cap - nseg, np.int64)))
-                seg_hi = np.concatenate((seg_hi, np.empty(cap - nseg, np.int64)))
-            seg_lo[nseg] = lo
-            seg_hi[nseg] = cols[j] + 1
-            nseg += 1
-            j += 1
-        seg_ptr[i + 1] = nseg
-    return first, seg_ptr, seg_lo[:nseg].copy(), seg_hi[:nseg].copy()
+        uptr[i + 1] += uptr[i]
+    fill = uptr[:n].copy()
+    uidx = np.empty(lptr[n], np.int64)
+    for i in range(n):
+        for p in range(lptr[i], lptr[i + 1]):
+            j = lidx[p]
+            uidx[fill[j]] = i
+            fill[j] += 1
+    return lptr, lidx, uptr, uidx
 
 
 @njit(cache=True)
-def _factor_cost(first, seg_ptr, seg_lo, seg_hi):
-    """Multiply–adds of :func:`_factor_kernel` for a given symbolic structure.
+def _blocks(uptr, uidx, max_block):
+    """Group consecutive pivots with nested structure ``struct(k) = {k+1} ∪ struct(k+1)``.
 
     Parameters
     ----------
-    first : int64 (n,)
-    seg_ptr : int64 (n + 1,)
-    seg_lo, seg_hi : int64 (nseg,)
+    uptr, uidx : int64 (n + 1,), (nnz_u,)
+        Sorted structure of the rows of ``U``.
+    max_block : int
+        Largest block.
 
     Returns
     -------
-    fma : int64
-        Multiply–adds of the inner products (both ``L`` and ``U``).
-    nnz : int64
-        Strictly lower entries of ``L`` (= strictly upper entries of ``U``).
+    blk_ptr : int64 (n_blocks + 1,)
+        Block ``b`` is the pivots ``blk_ptr[b]:blk_ptr[b+1]``.
     """
-    n = first.shape[0]
-    fma = 0
-    nnz = 0
-    for i in range(n):
-        fi = first[i]
-        for s in range(seg_ptr[i], seg_ptr[i + 1]):
-            for c in range(seg_lo[s], seg_hi[s]):
-                nnz += 1
-                for t in range(seg_ptr[c], seg_ptr[c + 1]):
-                    k0 = max(seg_lo[t], fi)
-                    if seg_hi[t] > k0:
-                        fma += 2 * (seg_hi[t] - k0)
-            fma += seg_hi[s] - seg_lo[s]
-    return fma, nnz
+    n = uptr.shape[0] - 1
+    out = np.empty(n + 1, np.int64)
+    out[0] = 0
+    nb = 0
+    k0 = 0
+    for k in range(n - 1):
+        a0, a1 = uptr[k], uptr[k + 1]
+        b0, b1 = uptr[k + 1], uptr[k + 2]
+        nested = a1 - a0 == b1 - b0 + 1 and a1 > a0 and uidx[a0] == k + 1
+        if nested:
+            for q in range(b1 - b0):
+                if uidx[a0 + 1 + q] != uidx[b0 + q]:
+                    nested = False
+                    break
+        if not nested or k + 1 - k0 == max_block:
+            nb += 1
+            out[nb] = k + 1
+            k0 = k + 1
+    nb += 1
+    out[nb] = n
+    return out[:nb + 1].copy()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -202,98 +393,239 @@ def _factor_cost(first, seg_ptr, seg_lo, seg_hi):
 # ---------------------------------------------------------------------------------------------
 
 @njit(cache=True, fastmath=_FASTMATH)
-def _factor_kernel(data, slot, diag_pos, lbase, ubase, first, seg_ptr, seg_lo, seg_hi, env,
-                   inv_diag, pivot_tol, stats):
-    """Scatter CSR values into the envelope and factor ``P A Pᵀ = L U`` in place, no pivoting.
+def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, base, lrun_ptr, lrun_lo,
+                   lrun_hi, urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, stats):
+    """Scatter ``A = data + coef * data2`` into the envelope and factor ``P A Pᵀ = L U`` in place,
+    without pivoting.
 
     Parameters
     ----------
     data : float64 (nnz,)
-        CSR values of ``A`` on the fixed pattern.
+        CSR values on the fixed pattern (e.g. the stiffness ``K``).
+    data2 : float64 (nnz,)
+        Second CSR values on the same pattern (e.g. the mass ``M``); ignored when ``coef == 0``.
+    coef : float
+        Factor of ``data2``.
     slot : int64 (nnz,)
         Position in ``env`` of each CSR entry.
+    accumulate : bool
+        The pattern has duplicate entries: add them up (``zero_slots`` then lists every structural
+        slot) instead of assigning.
+    zero_slots : int64 (nzero,)
+        Structural slots to clear before the scatter (the fill, when ``accumulate`` is false).
     diag_pos : int64 (n,)
-        CSR position of ``A[i, i]`` (original numbering), ``-1`` if not in the pattern.
-    lbase, ubase : int64 (n,)
-        ``L[i, k] = env[lbase[i] + k]``, ``U[k, i] = env[ubase[i] + k]`` (permuted numbering).
-    first : int64 (n,)
-        First envelope column of each permuted row.
-    seg_ptr : int64 (n + 1,)
-    seg_lo, seg_hi : int64 (nseg,)
-        Exact structure of the rows of ``L`` as runs of columns.
+        CSR position of each diagonal entry of ``A``, ``-1`` if not in the pattern.
+    base : int64 (n,)
+        Entry ``(i, j)`` of the permuted matrix / factors is ``env[base[i] + j]``.
+    lrun_ptr, lrun_lo, lrun_hi : int64 (n + 1,), (nrun_l,), (nrun_l,)
+        Structure of the rows of ``L`` (columns ``< i``) as runs.
+    urun_ptr, urun_lo, urun_hi : int64 (n + 1,), (nrun_u,), (nrun_u,)
+        Structure of the rows of ``U`` (columns ``> i``) as runs.
+    blk_ptr : int64 (n_blocks + 1,)
+        Pivot blocks (at most 4 pivots with nested structure).
     env : float64 (nenv,)
-        Envelope storage, overwritten with ``L`` and ``U``. Entries outside the structure must be
-        zero on entry (they are never written).
+        Output: ``L`` (unit diagonal not stored) and ``U``. Entries outside the structure must be
+        zero; they are never written.
     inv_diag : float64 (n,)
         Output: ``1 / U[i, i]``.
     pivot_tol : float
         Relative pivot threshold.
     stats : float64 (3,)
-        Output: ``max |diag(A)|``, ``min |pivot|`` over the steps done, the failing pivot.
+        Output: ``max |diag(A)|``, ``min |pivot|`` of the steps done, the failing pivot.
 
     Returns
     -------
     int
         ``-1`` on success, else the elimination step whose pivot failed.
     """
-    n = first.shape[0]
-    # zero the structural entries, then scatter
-    for i in range(n):
-        li = lbase[i]
-        ui = ubase[i]
-        for s in range(seg_ptr[i], seg_ptr[i + 1]):
-            for k in range(seg_lo[s], seg_hi[s]):
-                env[li + k] = 0.0
-                env[ui + k] = 0.0
-        env[ui + i] = 0.0
-    for p in range(data.shape[0]):
-        env[slot[p]] += data[p]
+    n = base.shape[0]
+    for q in range(zero_slots.shape[0]):
+        env[zero_slots[q]] = 0.0
+    combine = coef != 0.0
+    if accumulate:
+        if combine:
+            for p in range(data.shape[0]):
+                env[slot[p]] += data[p] + coef * data2[p]
+        else:
+            for p in range(data.shape[0]):
+                env[slot[p]] += data[p]
+    elif combine:
+        for p in range(data.shape[0]):
+            env[slot[p]] = data[p] + coef * data2[p]
+    else:
+        for p in range(data.shape[0]):
+            env[slot[p]] = data[p]
     dmax = 0.0
     for i in range(n):
-        p = diag_pos[i]
-        if p >= 0:
-            a = abs(data[p])
+        if diag_pos[i] >= 0:
+            a = abs(data[diag_pos[i]] + coef * data2[diag_pos[i]]) if combine else abs(data[diag_pos[i]])
             if a > dmax:
                 dmax = a
     thresh = pivot_tol * dmax
     stats[0] = dmax
     pmin = np.inf
-    for i in range(n):
-        li = lbase[i]
-        ui = ubase[i]
-        fi = first[i]
-        d = env[ui + i]
-        for s in range(seg_ptr[i], seg_ptr[i + 1]):
-            for c in range(seg_lo[s], seg_hi[s]):
-                lc = lbase[c]
-                uc = ubase[c]
-                sl = env[li + c]    # A[i, c] - Σ L[i, k] U[k, c]
-                su = env[ui + c]    # A[c, i] - Σ L[c, k] U[k, i]
-                for t in range(seg_ptr[c], seg_ptr[c + 1]):
-                    k0 = max(seg_lo[t], fi)
-                    for k in range(k0, seg_hi[t]):
-                        sl -= env[li + k] * env[uc + k]
-                        su -= env[lc + k] * env[ui + k]
-                lic = sl * inv_diag[c]
-                env[li + c] = lic
-                env[ui + c] = su
-                d -= lic * su
-        env[ui + i] = d
-        a = abs(d)
-        if not (a > thresh) or not np.isfinite(d):
-            stats[1] = min(pmin, a)
-            stats[2] = d
-            return i
-        if a < pmin:
-            pmin = a
-        inv_diag[i] = 1.0 / d
+    for b in range(blk_ptr.shape[0] - 1):
+        k0 = blk_ptr[b]
+        k1 = blk_ptr[b + 1]
+        # (a) pivots of the block; rows of the block updated over their whole structure
+        for p in range(k0, k1):
+            bp = base[p]
+            d = env[bp + p]
+            a = abs(d)
+            if not (a > thresh) or not np.isfinite(d):
+                stats[1] = min(pmin, a)
+                stats[2] = d
+                return p
+            if a < pmin:
+                pmin = a
+            inv = 1.0 / d
+            inv_diag[p] = inv
+            for i in range(p + 1, k1):
+                bi = base[i]
+                l = env[bi + p] * inv
+                env[bi + p] = l
+                for t in range(urun_ptr[p], urun_ptr[p + 1]):
+                    lo = urun_lo[t]
+                    m = urun_hi[t] - lo
+                    ri = env[bi + lo:bi + lo + m]
+                    rp = env[bp + lo:bp + lo + m]
+                    for j in range(m):
+                        ri[j] -= l * rp[j]
+        # (b) rows below the block: L entries by a small triangular solve, then the Schur update
+        #     of the common outer structure S = struct(k1 - 1) with rank (k1 - k0)
+        kl = k1 - 1
+        s0 = urun_ptr[kl]
+        s1 = urun_ptr[kl + 1]
+        r = k1 - k0
+        if r == 4:
+            b0 = base[k0]
+            b1 = base[k0 + 1]
+            b2 = base[k0 + 2]
+            b3 = base[k0 + 3]
+            u01 = env[b0 + k0 + 1]
+            u02 = env[b0 + k0 + 2]
+            u03 = env[b0 + k0 + 3]
+            u12 = env[b1 + k0 + 2]
+            u13 = env[b1 + k0 + 3]
+            u23 = env[b2 + k0 + 3]
+            # W = inverse of the 4×4 upper triangle of the block: L[i, k0:k0+4] = A[i, k0:k0+4] W
+            # has no dependency chain (the substitution would have one per row)
+            w00 = inv_diag[k0]
+            w11 = inv_diag[k0 + 1]
+            w22 = inv_diag[k0 + 2]
+            w33 = inv_diag[k0 + 3]
+            w01 = -w11 * w00 * u01
+            w12 = -w22 * w11 * u12
+            w02 = -w22 * (w00 * u02 + w01 * u12)
+            w23 = -w33 * w22 * u23
+            w13 = -w33 * (w11 * u13 + w12 * u23)
+            w03 = -w33 * (w00 * u03 + w01 * u13 + w02 * u23)
+            for s in range(s0, s1):
+                i = urun_lo[s]
+                while i < urun_hi[s]:
+                    two = i + 1 < urun_hi[s]
+                    bi = base[i] + k0
+                    a0 = env[bi]
+                    a1 = env[bi + 1]
+                    a2 = env[bi + 2]
+                    a3 = env[bi + 3]
+                    l0 = a0 * w00
+                    l1 = a0 * w01 + a1 * w11
+                    l2 = a0 * w02 + a1 * w12 + a2 * w22
+                    l3 = a0 * w03 + a1 * w13 + a2 * w23 + a3 * w33
+                    env[bi] = l0
+                    env[bi + 1] = l1
+                    env[bi + 2] = l2
+                    env[bi + 3] = l3
+                    bi = base[i]
+                    if two:                      # two rows at once share the loads of U
+                        bj = base[i + 1] + k0
+                        a0 = env[bj]
+                        a1 = env[bj + 1]
+                        a2 = env[bj + 2]
+                        a3 = env[bj + 3]
+                        m0 = a0 * w00
+                        m1 = a0 * w01 + a1 * w11
+                        m2 = a0 * w02 + a1 * w12 + a2 * w22
+                        m3 = a0 * w03 + a1 * w13 + a2 * w23 + a3 * w33
+                        env[bj] = m0
+                        env[bj + 1] = m1
+                        env[bj + 2] = m2
+                        env[bj + 3] = m3
+                        bj = base[i + 1]
+                        for t in range(s0, s1):
+                            lo = urun_lo[t]
+                            m = urun_hi[t] - lo
+                            ri = env[bi + lo:bi + lo + m]
+                            rj = env[bj + lo:bj + lo + m]
+                            w0 = env[b0 + lo:b0 + lo + m]
+                            w1 = env[b1 + lo:b1 + lo + m]
+                            w2 = env[b2 + lo:b2 + lo + m]
+                            w3 = env[b3 + lo:b3 + lo + m]
+                            for j in range(m):
+                                x0 = w0[j]
+                                x1 = w1[j]
+                                x2 = w2[j]
+                                x3 = w3[j]
+                                ri[j] -= l0 * x0 + l1 * x1 + l2 * x2 + l3 * x3
+                                rj[j] -= m0 * x0 + m1 * x1 + m2 * x2 + m3 * x3
+                        i += 2
+                    else:
+                        for t in range(s0, s1):
+                            lo = urun_lo[t]
+                            m = urun_hi[t] - lo
+                            ri = env[bi + lo:bi + lo + m]
+                            w0 = env[b0 + lo:b0 + lo + m]
+                            w1 = env[b1 + lo:b1 + lo + m]
+                            w2 = env[b2 + lo:b2 + lo + m]
+                            w3 = env[b3 + lo:b3 + lo + m]
+                            for j in range(m):
+                                ri[j] -= l0 * w0[j] + l1 * w1[j] + l2 * w2[j] + l3 * w3[j]
+                        i += 1
+        else:
+            for s in range(s0, s1):
+                for i in range(urun_lo[s], urun_hi[s]):
+                    bi = base[i]
+                    for p in range(k0, k1):
+                        acc = env[bi + p]
+                        for q in range(k0, p):
+                            acc -= env[bi + q] * env[base[q] + p]
+                        env[bi + p] = acc * inv_diag[p]
+                    p = k0
+                    while p < k1:
+                        if k1 - p >= 2:
+                            l0 = env[bi + p]
+                            l1 = env[bi + p + 1]
+                            b0 = base[p]
+                            b1 = base[p + 1]
+                            for t in range(s0, s1):
+                                lo = urun_lo[t]
+                                m = urun_hi[t] - lo
+                                ri = env[bi + lo:bi + lo + m]
+                                w0 = env[b0 + lo:b0 + lo + m]
+                                w1 = env[b1 + lo:b1 + lo + m]
+                                for j in range(m):
+                                    ri[j] -= l0 * w0[j] + l1 * w1[j]
+                            p += 2
+                        else:
+                            l0 = env[bi + p]
+                            b0 = base[p]
+                            for t in range(s0, s1):
+                                lo = urun_lo[t]
+                                m = urun_hi[t] - lo
+                                ri = env[bi + lo:bi + lo + m]
+                                w0 = env[b0 + lo:b0 + lo + m]
+                                for j in range(m):
+                                    ri[j] -= l0 * w0[j]
+                            p += 1
     stats[1] = pmin
     stats[2] = 0.0
     return -1
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def _solve_kernel(b, perm, lbase, ubase, seg_ptr, seg_lo, seg_hi, env, inv_diag, work, out):
+def _solve_kernel(b, perm, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env,
+                  inv_diag, work, out):
     """Solve ``A x = b`` with the factors of ``P A Pᵀ = L U``.
 
     Parameters
@@ -302,9 +634,11 @@ def _solve_kernel(b, perm, lbase, ubase, seg_ptr, seg_lo, seg_hi, env, inv_diag,
         Right-hand side (original numbering).
     perm : int64 (n,)
         ``perm[i]`` is the original index of permuted unknown ``i``.
-    lbase, ubase : int64 (n,)
-    seg_ptr : int64 (n + 1,)
-    seg_lo, seg_hi : int64 (nseg,)
+    base : int64 (n,)
+    lrun_ptr, lrun_lo, lrun_hi : int64
+        Structure of the rows of ``L`` as runs.
+    urun_ptr, urun_lo, urun_hi : int64
+        Structure of the rows of ``U`` as runs.
     env : float64 (nenv,)
         Factors from :func:`_factor_kernel`.
     inv_diag : float64 (n,)
@@ -316,77 +650,35 @@ def _solve_kernel(b, perm, lbase, ubase, seg_ptr, seg_lo, seg_hi, env, inv_diag,
     n = perm.shape[0]
     for i in range(n):
         work[i] = b[perm[i]]
-    # L y = P b   (row-oriented, unit diagonal)
-    for i in range(n):
-        li = lbase[i]
+    for i in range(n):                                   # L y = P b
+        bi = base[i]
         acc = work[i]
-        for s in range(seg_ptr[i], seg_ptr[i + 1]):
-            for k in range(seg_lo[s], seg_hi[s]):
-                acc -= env[li + k] * work[k]
+        for s in range(lrun_ptr[i], lrun_ptr[i + 1]):
+            lo = lrun_lo[s]
+            m = lrun_hi[s] - lo
+            li = env[bi + lo:bi + lo + m]
+            y = work[lo:lo + m]
+            for j in range(m):
+                acc -= li[j] * y[j]
         work[i] = acc
-    # U z = y   (column-oriented)
-    for i in range(n - 1, -1, -1):
-        ui = ubase[i]
-        xi = work[i] * inv_diag[i]
-        work[i] = xi
-        for s in range(seg_ptr[i], seg_ptr[i + 1]):
-            for k in range(seg_lo[s], seg_hi[s]):
-                work[k] -= env[ui + k] * xi
+    for i in range(n - 1, -1, -1):                       # U z = y
+        bi = base[i]
+        acc = work[i]
+        for s in range(urun_ptr[i], urun_ptr[i + 1]):
+            lo = urun_lo[s]
+            m = urun_hi[s] - lo
+            ui = env[bi + lo:bi + lo + m]
+            z = work[lo:lo + m]
+            for j in range(m):
+                acc -= ui[j] * z[j]
+        work[i] = acc * inv_diag[i]
     for i in range(n):
         out[perm[i]] = work[i]
 
 
 # ---------------------------------------------------------------------------------------------
-# Orderings (Python, once per pattern)
+# The solver
 # ---------------------------------------------------------------------------------------------
-
-def _arrowhead_ordering(sym: sp.csr_matrix, is_sep: np.ndarray) -> np.ndarray:
-    """Non-separator components by RCM, each oriented so its separator-side end is last; the
-    components touching fewest separator DOFs first; separators last, by first neighbour."""
-    n = sym.shape[0]
-    keep = np.flatnonzero(~is_sep)
-    sub = sym[keep][:, keep].tocsr()
-    ncomp, labels = connected_components(sub, directed=False)
-    rcm = reverse_cuthill_mckee(sub, symmetric_mode=True)   # components stay contiguous
-    # DOFs adjacent to a separator, and how many separator DOFs each component touches
-    sep_adj = np.asarray(sym[:, np.flatnonzero(is_sep)].getnnz(axis=1) > 0)[keep]
-    comp_order = []
-    for comp in range(ncomp):
-        seq = rcm[labels[rcm] == comp]                       # sub-indices, RCM order
-        adj_pos = np.flatnonzero(sep_adj[seq])
-        if adj_pos.size and adj_pos.mean() < 0.5 * (seq.size - 1):
-            seq = seq[::-1]
-        comp_order.append((int(sep_adj[seq].sum()), -seq.size, comp, keep[seq]))
-    comp_order.sort(key=lambda t: t[:3])
-    head = np.concatenate([t[3] for t in comp_order]) if comp_order else np.empty(0, np.int64)
-    pos = np.full(n, n, np.int64)
-    pos[head] = np.arange(head.size)
-    seps = np.flatnonzero(is_sep)
-    first_nb = np.array([pos[sym.indices[sym.indptr[s]:sym.indptr[s + 1]]].min() for s in seps],
-                        dtype=np.int64)
-    seps = seps[np.lexsort((seps, first_nb))]
-    return np.concatenate((head, seps)).astype(np.int64)
-
-
-def _candidate_orderings(sym: sp.csr_matrix):
-    """(name, perm) pairs to compare."""
-    n = sym.shape[0]
-    yield "natural", np.arange(n, dtype=np.int64)
-    yield "rcm", reverse_cuthill_mckee(sym, symmetric_mode=True).astype(np.int64)
-    deg = np.diff(sym.indptr)
-    levels = np.unique(deg)[::-1]
-    tried = 0
-    for d in levels[1:]:
-        # separators: DOFs of degree > d (nodes shared by more elements than chain nodes are)
-        is_sep = deg > d
-        nsep = int(is_sep.sum())
-        if nsep > 0.25 * n:
-            break
-        yield f"arrowhead(deg>{d})", _arrowhead_ordering(sym, is_sep)
-        tried += 1
-        if tried == 6:
-            break
-
 
 def _as_index_array(a, name: str) -> np.ndarray:
     a = np.asarray(a)
@@ -395,10 +687,6 @@ def _as_index_array(a, name: str) -> np.ndarray:
                          f"dtype {a.dtype}")
     return np.ascontiguousarray(a, dtype=np.int64)
 
-
-# ---------------------------------------------------------------------------------------------
-# The solver
-# ---------------------------------------------------------------------------------------------
 
 class SkylineLU:
     """LU without pivoting of a sparse matrix on a fixed pattern, in envelope (skyline) storage.
@@ -410,8 +698,9 @@ class SkylineLU:
     indptr : int (n + 1,)
         CSR row pointer of the fixed pattern.
     indices : int (nnz,)
-        CSR column indices. The pattern should be structurally symmetric (it is symmetrized
-        internally if not; the missing entries are then treated as explicit zeros).
+        CSR column indices. The pattern should be structurally symmetric; if it is not, it is
+        symmetrized internally (the missing entries are then explicit zeros of the factor).
+        Duplicate entries are summed.
     pivot_tol : float, keyword-only
         A pivot ``d`` fails when ``|d| <= pivot_tol * max |diag(A)|`` or ``d`` is not finite.
     ordering : {"auto", "rcm", "natural"}, keyword-only
@@ -422,10 +711,13 @@ class SkylineLU:
     perm : int64 (n,)
         ``perm[i]`` is the original index of the ``i``-th eliminated unknown.
     ordering_name : str
-        Which candidate ordering was kept.
-    min_pivot_ratio : float
-        After :meth:`factor`: ``min |pivot| / max |diag(A)|`` — a cheap stability indicator
-        (values far below ~1e-8 mean the no-pivoting LU may have lost accuracy).
+        The ordering kept.
+    factor_fma : int
+        Multiply–adds of one factorization (``Σ_k |struct(k)|²``).
+    nnz_factor : int
+        Structural non-zeros of ``L + U``.
+    candidates : dict[str, int]
+        ``factor_fma`` of every ordering tried.
 
     Notes
     -----
@@ -440,9 +732,9 @@ class SkylineLU:
         indices = _as_index_array(indices, "indices")
         if indptr.shape[0] != n + 1 or indptr[0] != 0 or np.any(np.diff(indptr) < 0) \
                 or indptr[-1] != indices.shape[0]:
-            raise ValueError(f"SkylineLU: indptr must be non-decreasing of length n + 1 = {n + 1} "
-                             f"from 0 to len(indices) = {indices.shape[0]}, got length "
-                             f"{indptr.shape[0]}, ends {indptr[0]}..{indptr[-1]}")
+            raise ValueError(f"SkylineLU: indptr must be non-decreasing, of length n + 1 = {n + 1}, "
+                             f"from 0 to len(indices) = {indices.shape[0]}; got length "
+                             f"{indptr.shape[0]} from {indptr[0]} to {indptr[-1]}")
         if indices.size and (indices.min() < 0 or indices.max() >= n):
             raise ValueError(f"SkylineLU: column indices must lie in [0, {n}), got "
                              f"[{indices.min()}, {indices.max()}]")
@@ -455,45 +747,59 @@ class SkylineLU:
         self.pivot_tol = float(pivot_tol)
 
         a = sp.csr_matrix((np.ones(self.nnz), indices, indptr), shape=(n, n))
-        sym = (a + a.T + sp.identity(n, format="csr")).tocsr()
+        sym = (abs(a) + abs(a.T) + sp.identity(n, format="csr")).tocsr()
+        sym.sum_duplicates()
         sym.sort_indices()
-        sym.indices = sym.indices.astype(np.int64)
         sym.indptr = sym.indptr.astype(np.int64)
+        sym.indices = sym.indices.astype(np.int64)
 
         best = None
-        for name, perm in _candidate_orderings(sym):
-            if ordering != "auto" and name != ordering:
-                continue
-            iperm = np.empty(n, np.int64)
-            iperm[perm] = np.arange(n, dtype=np.int64)
+        self.candidates = {}
+        for name, perm in _candidate_orderings(sym, ordering):
             ps = sym[perm][:, perm].tocsr()
-            sym_p = _symbolic(n, ps.indptr.astype(np.int64), ps.indices.astype(np.int64))
-            fma, nnz_l = _factor_cost(*sym_p)
-            cost = int(fma) + 4 * int(nnz_l)       # inner-product work + per-entry overhead
-            if best is None or cost < best[0]:
-                best = (cost, name, perm, iperm, sym_p, int(fma), int(nnz_l))
-        _, self.ordering_name, perm, iperm, sym_p, self.factor_fma, nnz_l = best
-        self.perm = perm
-        self._iperm = iperm
-        self._first, self._seg_ptr, self._seg_lo, self._seg_hi = sym_p
-        self.nnz_factor = 2 * nnz_l + n
+            ps.sort_indices()
+            structure = _symbolic(ps.indptr.astype(np.int64), ps.indices.astype(np.int64))
+            counts = np.diff(structure[2])
+            fma = int(np.dot(counts, counts))
+            self.candidates[name] = fma
+            if best is None or fma < best[0]:
+                best = (fma, name, perm, structure)
+        self.factor_fma, self.ordering_name, perm, (lptr, lidx, uptr, uidx) = best
+        self.perm = np.ascontiguousarray(perm, dtype=np.int64)
+        iperm = np.empty(n, np.int64)
+        iperm[self.perm] = np.arange(n, dtype=np.int64)
+        self.nnz_factor = int(2 * lptr[-1] + n)
 
-        # envelope layout: row i stores L[i, first:i] then U[first:i+1, i]
-        w = np.arange(n, dtype=np.int64) - self._first            # (n,) strictly-lower widths
+        self._lrun = _to_runs(lptr, lidx)
+        self._urun = _to_runs(uptr, uidx)
+        self._blk_ptr = _blocks(uptr, uidx, _MAX_BLOCK)
+
+        # variable-band row storage: row i holds columns first[i] .. last[i]
+        rows = np.arange(n, dtype=np.int64)
+        counts_l = np.diff(lptr)
+        counts_u = np.diff(uptr)
+        self._first = rows.copy()                                   # (n,) first column of row i
+        self._first[counts_l > 0] = lidx[lptr[:-1][counts_l > 0]]
+        self._last = rows.copy()                                    # (n,) last column of row i
+        self._last[counts_u > 0] = uidx[uptr[1:][counts_u > 0] - 1]
         start = np.zeros(n + 1, np.int64)
-        np.cumsum(2 * w + 1, out=start[1:])
-        self._lbase = np.ascontiguousarray(start[:-1] - self._first)
-        self._ubase = np.ascontiguousarray(start[:-1] + w - self._first)
+        np.cumsum(self._last - self._first + 1, out=start[1:])
+        self._base = np.ascontiguousarray(start[:-1] - self._first)
         self._env = np.zeros(int(start[-1]), np.float64)
 
         # scatter map: CSR position -> envelope slot
-        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr))
-        pr, pc = iperm[rows], iperm[indices]
-        self._slot = np.ascontiguousarray(
-            np.where(pr > pc, self._lbase[pr] + pc, self._ubase[pc] + pr).astype(np.int64))
+        csr_rows = np.repeat(rows, np.diff(indptr))
+        self._slot = np.ascontiguousarray(self._base[iperm[csr_rows]] + iperm[indices])
+        # structural slots: clear the fill before each scatter (all of them if entries repeat)
+        structural = np.concatenate((self._base[np.repeat(rows, counts_l)] + lidx,
+                                     self._base + rows,
+                                     self._base[np.repeat(rows, counts_u)] + uidx))
+        self._accumulate = bool(np.unique(self._slot).size < self._slot.size)
+        self._zero_slots = np.ascontiguousarray(
+            structural if self._accumulate else np.setdiff1d(structural, self._slot), dtype=np.int64)
         diag_pos = np.full(n, -1, np.int64)
-        is_diag = rows == indices
-        diag_pos[rows[is_diag]] = np.flatnonzero(is_diag)
+        on_diag = np.flatnonzero(csr_rows == indices)
+        diag_pos[csr_rows[on_diag]] = on_diag
         self._diag_pos = diag_pos
 
         self._inv_diag = np.zeros(n, np.float64)
@@ -505,29 +811,35 @@ class SkylineLU:
 
     @property
     def bandwidth(self) -> int:
-        """Largest envelope half-width ``max_i (i - first[i])`` of the permuted matrix."""
-        return int(np.max(np.arange(self.n) - self._first))
+        """Largest half-bandwidth ``max_i max(i - first[i], last[i] - i)`` of the permuted matrix."""
+        rows = np.arange(self.n)
+        return int(max(np.max(rows - self._first), np.max(self._last - rows)))
 
     @property
     def profile_size(self) -> int:
-        """Stored envelope entries: ``L`` and ``U`` envelopes plus the diagonal."""
+        """Entries of the envelope storage (``L`` and ``U`` envelopes plus the diagonal)."""
         return int(self._env.shape[0])
 
     @property
     def min_pivot_ratio(self) -> float:
-        """``min |pivot| / max |diag(A)|`` of the last factorization (``nan`` before one)."""
+        """``min |pivot| / max |diag(A)|`` of the last successful factorization (``nan`` before)."""
         if not self._factored or self._stats[0] == 0.0:
             return float("nan")
         return float(self._stats[1] / self._stats[0])
 
     # -- numerics -------------------------------------------------------------------------------
 
-    def factor(self, data) -> None:
-        """Factor the matrix whose CSR values on the fixed pattern are ``data``.
+    def factor(self, data, *, mass=None, coef: float = 0.0) -> None:
+        """Factor ``A = data + coef * mass`` (CSR values on the fixed pattern).
 
         Parameters
         ----------
         data : float64 (nnz,)
+            Values of ``A`` (or of ``K`` when ``mass`` is given).
+        mass : float64 (nnz,), optional, keyword-only
+            Values of a second matrix on the same pattern, added with factor ``coef`` during the
+            scatter (``K + c M`` of an implicit integrator without a temporary array).
+        coef : float, keyword-only
 
         Raises
         ------
@@ -537,10 +849,16 @@ class SkylineLU:
         data = np.ascontiguousarray(data, dtype=np.float64)
         if data.shape != (self.nnz,):
             raise ValueError(f"SkylineLU.factor: data must have shape ({self.nnz},), got {data.shape}")
+        if mass is None:
+            mass, coef = data, 0.0
+        else:
+            mass = np.ascontiguousarray(mass, dtype=np.float64)
+            if mass.shape != (self.nnz,):
+                raise ValueError(f"SkylineLU.factor: mass must have shape ({self.nnz},), got {mass.shape}")
         self._factored = False
-        step = _factor_kernel(data, self._slot, self._diag_pos, self._lbase, self._ubase,
-                              self._first, self._seg_ptr, self._seg_lo, self._seg_hi, self._env,
-                              self._inv_diag, self.pivot_tol, self._stats)
+        step = _factor_kernel(data, mass, float(coef), self._slot, self._accumulate, self._zero_slots,
+                              self._diag_pos, self._base, *self._lrun, *self._urun, self._blk_ptr,
+                              self._env, self._inv_diag, self.pivot_tol, self._stats)
         if step >= 0:
             raise SingularPivotError(self.perm[step], step, self._stats[2],
                                      self.pivot_tol * self._stats[0])
@@ -553,17 +871,17 @@ class SkylineLU:
         ----------
         b : float64 (n,)
         out : float64 (n,), C-contiguous, optional
-            Where to write ``x`` (may be ``b`` itself). Nothing is allocated when given and ``b``
-            is already float64 and C-contiguous.
+            Where to write ``x``; may be ``b`` itself. Nothing is allocated when ``out`` is given
+            and ``b`` is already a C-contiguous float64 array.
 
         Returns
         -------
         x : float64 (n,)
-            ``out`` if given.
+            ``out`` when given.
         """
         if not self._factored:
             raise NotFactoredError("SkylineLU.solve: no valid factorization; call factor(data) "
-                                   "first (the last factor may have raised SingularPivotError)")
+                                   "first (the last factor() may have raised SingularPivotError)")
         b = np.ascontiguousarray(b, dtype=np.float64)
         if b.shape != (self.n,):
             raise ValueError(f"SkylineLU.solve: b must have shape ({self.n},), got {b.shape}")
@@ -573,8 +891,8 @@ class SkylineLU:
                   and out.flags.c_contiguous and out.flags.writeable):
             raise ValueError(f"SkylineLU.solve: out must be a writable C-contiguous float64 array "
                              f"of shape ({self.n},)")
-        _solve_kernel(b, self.perm, self._lbase, self._ubase, self._seg_ptr, self._seg_lo,
-                      self._seg_hi, self._env, self._inv_diag, self._work, out)
+        _solve_kernel(b, self.perm, self._base, *self._lrun, *self._urun, self._env, self._inv_diag,
+                      self._work, out)
         return out
 
     def __repr__(self) -> str:

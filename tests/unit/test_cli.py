@@ -1,0 +1,75 @@
+"""The ``flexmb`` command line (contract: verbs, flags, JSON keys, exit codes)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+FLEXMB = [sys.executable, "-m", "flexmb_core.cli"]
+
+
+def run(*args, **kw):
+    return subprocess.run(FLEXMB + list(args), capture_output=True, text=True, cwd=ROOT, timeout=300, **kw)
+
+
+def test_run_writes_the_json_summary(tmp_path):
+    out = tmp_path / "out.json"
+    p = run("run", "scenes/cantilever_b1.yaml", "--until", "0.05", "--json", str(out), "--quiet")
+    assert p.returncode == 0, p.stderr
+    s = json.loads(out.read_text())
+    for key in ("steps", "wall_time_s", "rtf", "newton_iterations_mean", "newton_iterations_max",
+                "unconverged_steps", "outputs"):
+        assert key in s
+    assert s["steps"] == 50 and s["unconverged_steps"] == 0 and s["completed"] is True
+    assert s["rtf"] > 0 and 1 <= s["newton_iterations_max"] <= 10
+    assert len(s["outputs"]["tip"]) == 3 and s["outputs"]["tip"][2] < 0.0   # the tip goes down
+    assert {"kinetic", "strain", "gravity", "total"} <= set(s["outputs"]["energy"])
+
+
+def test_dt_flag_overrides_the_scene(tmp_path):
+    out = tmp_path / "o.json"
+    p = run("run", "scenes/cantilever_b1.yaml", "--until", "0.02", "--dt", "0.005", "--json", str(out), "--quiet")
+    assert p.returncode == 0, p.stderr
+    s = json.loads(out.read_text())
+    assert s["steps"] == 4 and s["dt"] == 0.005
+
+
+def test_check_prints_the_model_summary():
+    p = run("check", "scenes/actuator_arm.yaml")
+    assert p.returncode == 0, p.stderr
+    assert "free_dofs" in p.stdout and "actuator(frame): 1" in p.stdout and "mass" in p.stdout
+
+
+def test_bad_scene_exits_1_with_file_and_key(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "scenes/cantilever_b1.yaml").read_text().replace("radius: 0.005", "radius: -1"))
+    p = run("check", str(bad))
+    assert p.returncode == 1
+    assert f"{bad}:sections.rod.radius: expected a positive number (m), got -1.0" in p.stderr
+
+
+def test_bad_flag_value_exits_1():
+    p = run("run", "scenes/cantilever_b1.yaml", "--dt", "-1")
+    assert p.returncode == 1 and "--dt must be a positive number" in p.stderr
+
+
+def test_unconverged_run_exits_2_and_says_so(tmp_path):
+    scene = tmp_path / "s.yaml"
+    text = (ROOT / "scenes/cantilever_b1.yaml").read_text()
+    scene.write_text(text.replace("tolerance: 1.0e-10", "tolerance: 1.0e-10\n  max_iterations: 1\n  max_substep_levels: 0"))
+    out = tmp_path / "o.json"
+    p = run("run", str(scene), "--until", "0.01", "--json", str(out), "--quiet")
+    assert p.returncode == 2
+    assert "did not converge" in p.stderr
+    s = json.loads(out.read_text())
+    assert s["unconverged_steps"] == 1 and s["completed"] is False
+
+
+def test_commands_stewart_writes_a_table(tmp_path):
+    out = tmp_path / "cmd.csv"
+    p = run("commands", "stewart", "--out", str(out), "--dt", "0.01", "--until", "1")
+    assert p.returncode == 0, p.stderr
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("t,leg1,leg2,leg3,leg4,leg5,leg6")
+    assert len(lines) == 102

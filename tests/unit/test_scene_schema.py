@@ -1,0 +1,85 @@
+"""Strict scene schema: errors name file:key, the value received and what was expected."""
+
+import copy
+from pathlib import Path
+
+import pytest
+
+from builders import cantilever
+from flexmb_core.errors import SceneError
+from flexmb_core.model.compile import compile_scene
+from flexmb_core.scene import load_scene, scene_from_dict
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def _err(d, src="s.yaml"):
+    with pytest.raises(SceneError) as info:
+        compile_scene(scene_from_dict(d, source=src))
+    return str(info.value)
+
+
+def base():
+    return cantilever(forces={"f": {"node": "tip", "force": [0, 0, -1.0]}})
+
+
+def edit(fn):
+    d = copy.deepcopy(base())
+    fn(d)
+    return d
+
+
+@pytest.mark.parametrize("mutate, expected", [
+    (lambda d: d["members"]["beam"].update(elemnts=3), "s.yaml:members.beam: unknown key(s) ['elemnts']"),
+    (lambda d: d.update(gravity=[0, 0, -9.81]), "s.yaml:<root>: unknown key(s) ['gravity']"),
+    (lambda d: d["members"]["beam"].update(to="nowhere"), "s.yaml:members.beam.to: unknown node 'nowhere'"),
+    (lambda d: d["members"]["beam"].update(section="steel"), "s.yaml:members.beam.section: unknown section 'steel'"),
+    (lambda d: d["nodes"].update(tip=[1.0, 0.0]), "s.yaml:nodes.tip: expected a list of 3 numbers (m), got [1.0, 0.0]"),
+    (lambda d: d["materials"]["m"].update(E=-2.0), "s.yaml:materials.m.E: expected a positive number (Pa), got -2.0"),
+    (lambda d: d["materials"]["m"].update(E="stiff"), "s.yaml:materials.m.E: expected a number in Pa, got 'stiff'"),
+    (lambda d: d["members"]["beam"].update(order=7), "s.yaml:members.beam.order: expected an integer ≤ 4, got 7"),
+    (lambda d: d["members"]["beam"].update(kind="cable"), "expected one of ['frame', 'truss', 'actuator'], got 'cable'"),
+    (lambda d: d["sections"]["s"].update(radius=0.1), "key(s) ['radius'] do not apply to a rectangle"),
+    (lambda d: d["supports"].append({"node": "tip", "type": "weld"}), "s.yaml:supports[1].type: expected one of"),
+    (lambda d: d["loads"]["forces"]["f"].update(node="middle"), "s.yaml:loads.forces.f.node: unknown node 'middle'"),
+    (lambda d: d["solver"].update(dt=0), "s.yaml:solver.dt: expected a positive number (s), got 0.0"),
+    (lambda d: d["nodes"].update(lonely=[5, 5, 5]), "s.yaml:nodes: node(s) ['lonely'] are not used by any member"),
+    (lambda d: d["members"]["beam"].update(actuator={"variant": "bar"}), "only members of kind 'actuator' take an 'actuator' block"),
+    (lambda d: d["outputs"].update(x={"kind": "actuator_force", "actuator": "beam"}), "member 'beam' is not an actuator"),
+])
+def test_errors_name_file_key_value_and_expectation(mutate, expected):
+    assert expected in _err(edit(mutate))
+
+
+def test_yaml_file_errors_name_the_file(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("name: x\nmaterials: {m: {E: 1e9, rho: 1}}\nsections: {}\nnodes: {}\nmembers: {}\n")
+    with pytest.raises(SceneError, match=r"bad.yaml"):
+        load_scene(p)
+    with pytest.raises(SceneError, match="cannot read scene file"):
+        load_scene(tmp_path / "missing.yaml")
+    p.write_text("name: [unclosed\n")
+    with pytest.raises(SceneError, match="not valid YAML"):
+        load_scene(p)
+
+
+def test_exponent_floats_without_sign_are_numbers(tmp_path):
+    """YAML 1.1 reads '200.0e9' as a string; scenes accept it as a number."""
+    scene = load_scene(SCENES / "cantilever_b1.yaml")
+    assert scene.materials["steel"].E == 200.0e9
+
+
+def test_shipped_scenes_compile():
+    for path in sorted(SCENES.glob("*.yaml")):
+        model = compile_scene(load_scene(path))
+        s = model.summary()
+        assert s["dofs"] > 0 and s["mass_kg"] > 0
+
+
+def test_section_properties_are_computed():
+    model = compile_scene(load_scene(SCENES / "cantilever_b1.yaml"))
+    import math
+    g = model.frame_groups[0]
+    area = g.w[0].sum() * 8                         # Σw = element volume A·L/8
+    assert area == pytest.approx(math.pi * 0.005**2, rel=1e-12)
+    assert model.total_mass == pytest.approx(7850 * math.pi * 0.005**2, rel=1e-12)
