@@ -25,6 +25,47 @@ def actuator_forces(model: Model, ws: Workspace, state: State) -> np.ndarray:
     return -actuator_dudlam(model, ws, state.q, state.lam) / model.actuators.l0
 
 
+def _triangle_frame(p: np.ndarray) -> np.ndarray:
+    """Orthonormal frame (columns) of a triangle p (3, 3): x along p1→p2, z its normal."""
+    ex = p[2] - p[1]
+    ex = ex / np.linalg.norm(ex)
+    ez = np.cross(p[1] - p[0], p[2] - p[0])
+    ez = ez / np.linalg.norm(ez)
+    return np.column_stack((ex, np.cross(ez, ex), ez))
+
+
+def quaternion_wxyz(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix, w ≥ 0."""
+    tr = np.trace(rot)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([0.25 * s, (rot[2, 1] - rot[1, 2]) / s, (rot[0, 2] - rot[2, 0]) / s, (rot[1, 0] - rot[0, 1]) / s])
+    else:
+        i = int(np.argmax(np.diag(rot)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + rot[i, i] - rot[j, j] - rot[k, k])
+        q = np.empty(4)
+        q[0] = (rot[k, j] - rot[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (rot[j, i] + rot[i, j]) / s
+        q[1 + k] = (rot[k, i] + rot[i, k]) / s
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def platform_pose(model: Model, q: np.ndarray, nodes: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid (m) and orientation (w, x, y, z) of a platform given by three of its nodes.
+
+    The orientation is the rotation taking the triangle's reference frame to its current frame
+    (identity at t = 0), so a rigid platform's pose is recovered exactly.
+    """
+    ids = [model.node_ydofs[model.node(n)] for n in nodes]
+    p = np.array([q[d] for d in ids])
+    p0 = np.array([model.q0[d] for d in ids])
+    rot = _triangle_frame(p) @ _triangle_frame(p0).T
+    return p.mean(axis=0), quaternion_wxyz(rot)
+
+
 def evaluate_output(model: Model, ws: Workspace, state: State, out: Output, energy: dict | None = None):
     """Value of one declared output (float, list or dict; JSON-ready)."""
     q = state.q
@@ -41,6 +82,9 @@ def evaluate_output(model: Model, ws: Workspace, state: State, out: Output, ener
         return q[info.ydofs].tolist()
     if out.kind == "energy":
         return dict(energy or {})
+    if out.kind == "platform_pose":
+        pos, quat = platform_pose(model, q, out.nodes)
+        return {"position": pos.tolist(), "orientation_wxyz": quat.tolist()}
     i = model.actuators.names.index(out.actuator)
     if out.kind == "actuator_length":
         return float(actuator_lengths(model, q)[i])

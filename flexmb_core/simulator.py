@@ -62,7 +62,10 @@ class Simulator:
         act = self.model.actuators
         if self._override is not None:
             return self._override.copy()
-        return np.array([act.l0[i] if s is None else evaluate(s, t) for i, s in enumerate(act.commands)])
+        lengths = np.array([act.l0[i] if s is None else evaluate(s, t) for i, s in enumerate(act.commands)])
+        if self.model.program is not None:
+            lengths[self.model.program_index] = self.model.program.lengths(t)
+        return lengths
 
     def set_commands(self, lengths: np.ndarray | None) -> None:
         """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals."""

@@ -331,6 +331,11 @@ def compile_scene(scene: Scene) -> Model:
         gravity_signal = scene.gravity.signal
     moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map)
 
+    program, program_index = None, np.zeros(0, dtype=np.int64)
+    if scene.commands is not None:
+        from ..commands import build_program
+        program_index = np.array([act_lookup[a] for a in scene.commands.actuators], dtype=np.int64)
+        program = build_program(scene.commands, act_l0[program_index], f"{scene.source}:commands")
     mass_csr = (mfull.indptr.astype(np.int64), mfull.indices.astype(np.int64), mfull.data.astype(float))
     actuators = Actuators(tuple(act_names), np.array([member_lookup[n] for n in act_names], dtype=np.int64),
                           act_l0, act_cmd, act_stroke, act_ends)
@@ -339,7 +344,7 @@ def compile_scene(scene: Scene) -> Model:
     return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
                  tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
-                 scene.mass_damping, total_mass, node_lookup, member_lookup)
+                 scene.mass_damping, total_mass, program, program_index, node_lookup, member_lookup)
 
 
 def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map) -> MomentLoads:

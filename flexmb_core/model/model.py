@@ -119,6 +119,8 @@ class Model:
     node_ydofs: np.ndarray          # (nnodes, 3)
     mass_damping: float
     total_mass: float
+    program: object | None = None       # command program (flexmb_core.commands), or None
+    program_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     node_lookup: dict[str, int] = field(default_factory=dict)
     member_lookup: dict[str, int] = field(default_factory=dict)
 

@@ -14,7 +14,7 @@ import yaml
 
 from ..errors import SceneError
 from .reader import Node
-from .schema import (ActuatorSpec, Force, Gravity, MassOverride, Material, Member, Moment,
+from .schema import (ActuatorSpec, CommandProgramSpec, Force, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
 
 OUTPUT_KINDS = {
@@ -26,6 +26,7 @@ OUTPUT_KINDS = {
     "actuator_force": ("actuator",),
     "energy": (),
     "member_shape": ("member",),
+    "platform_pose": ("nodes",),
 }
 
 
@@ -43,6 +44,11 @@ _SceneYamlLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
+def parse_yaml(text: str) -> Any:
+    """Parse scene YAML text the way :func:`load_scene` does (``1e9`` is a float)."""
+    return yaml.load(text, Loader=_SceneYamlLoader)
+
+
 def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
     """Read and validate a scene file. ``overrides`` are merged into ``solver`` (CLI flags)."""
     path = Path(path)
@@ -51,7 +57,7 @@ def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Sce
     except OSError as exc:
         raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
     try:
-        data = yaml.load(text, Loader=_SceneYamlLoader)
+        data = parse_yaml(text)
     except yaml.YAMLError as exc:
         raise SceneError(str(path), f"not valid YAML: {exc}") from None
     return scene_from_dict(data, source=str(path), overrides=overrides)
@@ -62,7 +68,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     """Validate a scene given as nested dicts (as parsed from YAML)."""
     root = Node(data, "", source).mapping(
         {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
-         "point_masses", "damping", "solver", "outputs"},
+         "point_masses", "damping", "solver", "outputs", "commands"},
         {"name", "materials", "sections", "nodes", "members"})
     name = root.get("name").string()
     description = root.get("description", "").value
@@ -87,8 +93,24 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
     solver = _solver(root.get("solver", {}), overrides or {})
     outputs = tuple(_output(k, n, nodes, members) for k, n in root.get("outputs", {}).items())
+    commands = _commands(root.get("commands"), members) if root.has("commands") else None
     return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
-                 moments, pmasses, gravity, c_m, solver, outputs)
+                 moments, pmasses, gravity, c_m, solver, outputs, commands)
+
+
+def _commands(n: Node, members) -> CommandProgramSpec:
+    n.mapping({"program", "actuators", "start", "blend_time"}, {"program", "actuators"})
+    program = n.get("program").string(("stewart_appendix",))
+    acts = []
+    for a in n.get("actuators").list():
+        name = a.name_in(members, "member")
+        if members[name].kind != "actuator":
+            raise a.fail(f"member '{name}' is not an actuator (kind '{members[name].kind}')")
+        acts.append(name)
+    if len(set(acts)) != len(acts):
+        raise n.fail(f"actuators listed twice: {acts}", "actuators")
+    return CommandProgramSpec(program, tuple(acts), n.get("start", "blended").string(("exact", "blended")),
+                              n.get("blend_time", 1.0).number(positive=True, unit="s"))
 
 
 # -- pieces -------------------------------------------------------------------------------
@@ -290,13 +312,19 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
 
 
 def _output(name: str, n: Node, nodes, members) -> Output:
-    kind = n.mapping({"kind", "node", "member", "actuator"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
+    kind = n.mapping({"kind", "node", "member", "actuator", "nodes"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
     need = OUTPUT_KINDS[kind]
     extra = sorted(k for k in n.value if k != "kind" and k not in need)
     if extra:
         raise n.fail(f"key(s) {extra} do not apply to output kind '{kind}'; expected {list(need)}")
     node = n.get("node").name_in(nodes, "node") if "node" in need else None
     member = n.get("member").name_in(members, "member") if "member" in need else None
+    pose_nodes: tuple[str, ...] = ()
+    if "nodes" in need:
+        lst = n.get("nodes").list()
+        if len(lst) != 3:
+            raise n.fail(f"a platform pose is defined by 3 nodes, got {len(lst)}", "nodes")
+        pose_nodes = tuple(x.name_in(nodes, "node") for x in lst)
     actuator = None
     if "actuator" in need:
         actuator = n.get("actuator").name_in(members, "member")
@@ -308,4 +336,4 @@ def _output(name: str, n: Node, nodes, members) -> Output:
             raise n.fail(f"member '{member}' has no section vectors", "member")
         if node not in (mem.start, mem.end):
             raise n.fail(f"node '{node}' is not an end of member '{member}'", "node")
-    return Output(name, kind, node, member, actuator)
+    return Output(name, kind, node, member, actuator, pose_nodes)

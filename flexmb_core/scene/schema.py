@@ -146,6 +146,17 @@ class Output:
     node: str | None = None
     member: str | None = None
     actuator: str | None = None
+    nodes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class CommandProgramSpec:
+    """A generator that commands several actuators together (see :mod:`flexmb_core.commands`)."""
+
+    program: str                     # stewart_appendix
+    actuators: tuple[str, ...]
+    start: str = "blended"           # exact | blended (C² start from rest)
+    blend_time: float = 1.0          # s
 
 
 @dataclass(frozen=True)
@@ -167,3 +178,4 @@ class Scene:
     mass_damping: float
     solver: SolverSpec
     outputs: tuple[Output, ...] = field(default_factory=tuple)
+    commands: CommandProgramSpec | None = None

@@ -393,8 +393,8 @@ def _blocks(uptr, uidx, max_block):
 # ---------------------------------------------------------------------------------------------
 
 @njit(cache=True, fastmath=_FASTMATH)
-def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, base, lrun_ptr, lrun_lo,
-                   lrun_hi, urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, stats):
+def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_ptr, lrun_lo, lrun_hi,
+                   urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, stats):
     """Scatter ``A = data + coef * data2`` into the envelope and factor ``P A Pᵀ = L U`` in place,
     without pivoting.
 
@@ -413,8 +413,6 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
         slot) instead of assigning.
     zero_slots : int64 (nzero,)
         Structural slots to clear before the scatter (the fill, when ``accumulate`` is false).
-    diag_pos : int64 (n,)
-        CSR position of each diagonal entry of ``A``, ``-1`` if not in the pattern.
     base : int64 (n,)
         Entry ``(i, j)`` of the permuted matrix / factors is ``env[base[i] + j]``.
     lrun_ptr, lrun_lo, lrun_hi : int64 (n + 1,), (nrun_l,), (nrun_l,)
@@ -457,10 +455,9 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
             env[slot[p]] = data[p]
     dmax = 0.0
     for i in range(n):
-        if diag_pos[i] >= 0:
-            a = abs(data[diag_pos[i]] + coef * data2[diag_pos[i]]) if combine else abs(data[diag_pos[i]])
-            if a > dmax:
-                dmax = a
+        a = abs(env[base[i] + i])
+        if a > dmax:
+            dmax = a
     thresh = pivot_tol * dmax
     stats[0] = dmax
     pmin = np.inf
@@ -486,11 +483,11 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
                 env[bi + p] = l
                 for t in range(urun_ptr[p], urun_ptr[p + 1]):
                     lo = urun_lo[t]
-                    m = urun_hi[t] - lo
-                    ri = env[bi + lo:bi + lo + m]
-                    rp = env[bp + lo:bp + lo + m]
-                    for j in range(m):
-                        ri[j] -= l * rp[j]
+                    oi = np.uint64(bi + lo)      # unsigned: no negative-index test in the loop
+                    op = np.uint64(bp + lo)
+                    for jj in range(urun_hi[t] - lo):
+                        j = np.uint64(jj)
+                        env[oi + j] -= l * env[op + j]
         # (b) rows below the block: L entries by a small triangular solve, then the Schur update
         #     of the common outer structure S = struct(k1 - 1) with rank (k1 - k0)
         kl = k1 - 1
@@ -508,18 +505,10 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
             u12 = env[b1 + k0 + 2]
             u13 = env[b1 + k0 + 3]
             u23 = env[b2 + k0 + 3]
-            # W = inverse of the 4×4 upper triangle of the block: L[i, k0:k0+4] = A[i, k0:k0+4] W
-            # has no dependency chain (the substitution would have one per row)
-            w00 = inv_diag[k0]
-            w11 = inv_diag[k0 + 1]
-            w22 = inv_diag[k0 + 2]
-            w33 = inv_diag[k0 + 3]
-            w01 = -w11 * w00 * u01
-            w12 = -w22 * w11 * u12
-            w02 = -w22 * (w00 * u02 + w01 * u12)
-            w23 = -w33 * w22 * u23
-            w13 = -w33 * (w11 * u13 + w12 * u23)
-            w03 = -w33 * (w00 * u03 + w01 * u13 + w02 * u23)
+            v0 = inv_diag[k0]
+            v1 = inv_diag[k0 + 1]
+            v2 = inv_diag[k0 + 2]
+            v3 = inv_diag[k0 + 3]
             for s in range(s0, s1):
                 i = urun_lo[s]
                 while i < urun_hi[s]:
@@ -529,10 +518,10 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
                     a1 = env[bi + 1]
                     a2 = env[bi + 2]
                     a3 = env[bi + 3]
-                    l0 = a0 * w00
-                    l1 = a0 * w01 + a1 * w11
-                    l2 = a0 * w02 + a1 * w12 + a2 * w22
-                    l3 = a0 * w03 + a1 * w13 + a2 * w23 + a3 * w33
+                    l0 = a0 * v0
+                    l1 = (a1 - l0 * u01) * v1
+                    l2 = (a2 - l0 * u02 - l1 * u12) * v2
+                    l3 = (a3 - l0 * u03 - l1 * u13 - l2 * u23) * v3
                     env[bi] = l0
                     env[bi + 1] = l1
                     env[bi + 2] = l2
@@ -544,10 +533,10 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
                         a1 = env[bj + 1]
                         a2 = env[bj + 2]
                         a3 = env[bj + 3]
-                        m0 = a0 * w00
-                        m1 = a0 * w01 + a1 * w11
-                        m2 = a0 * w02 + a1 * w12 + a2 * w22
-                        m3 = a0 * w03 + a1 * w13 + a2 * w23 + a3 * w33
+                        m0 = a0 * v0
+                        m1 = (a1 - m0 * u01) * v1
+                        m2 = (a2 - m0 * u02 - m1 * u12) * v2
+                        m3 = (a3 - m0 * u03 - m1 * u13 - m2 * u23) * v3
                         env[bj] = m0
                         env[bj + 1] = m1
                         env[bj + 2] = m2
@@ -555,32 +544,33 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
                         bj = base[i + 1]
                         for t in range(s0, s1):
                             lo = urun_lo[t]
-                            m = urun_hi[t] - lo
-                            ri = env[bi + lo:bi + lo + m]
-                            rj = env[bj + lo:bj + lo + m]
-                            w0 = env[b0 + lo:b0 + lo + m]
-                            w1 = env[b1 + lo:b1 + lo + m]
-                            w2 = env[b2 + lo:b2 + lo + m]
-                            w3 = env[b3 + lo:b3 + lo + m]
-                            for j in range(m):
-                                x0 = w0[j]
-                                x1 = w1[j]
-                                x2 = w2[j]
-                                x3 = w3[j]
-                                ri[j] -= l0 * x0 + l1 * x1 + l2 * x2 + l3 * x3
-                                rj[j] -= m0 * x0 + m1 * x1 + m2 * x2 + m3 * x3
+                            oi = np.uint64(bi + lo)
+                            oj = np.uint64(bj + lo)
+                            o0 = np.uint64(b0 + lo)
+                            o1 = np.uint64(b1 + lo)
+                            o2 = np.uint64(b2 + lo)
+                            o3 = np.uint64(b3 + lo)
+                            for jj in range(urun_hi[t] - lo):
+                                j = np.uint64(jj)
+                                x0 = env[o0 + j]
+                                x1 = env[o1 + j]
+                                x2 = env[o2 + j]
+                                x3 = env[o3 + j]
+                                env[oi + j] -= l0 * x0 + l1 * x1 + l2 * x2 + l3 * x3
+                                env[oj + j] -= m0 * x0 + m1 * x1 + m2 * x2 + m3 * x3
                         i += 2
                     else:
                         for t in range(s0, s1):
                             lo = urun_lo[t]
-                            m = urun_hi[t] - lo
-                            ri = env[bi + lo:bi + lo + m]
-                            w0 = env[b0 + lo:b0 + lo + m]
-                            w1 = env[b1 + lo:b1 + lo + m]
-                            w2 = env[b2 + lo:b2 + lo + m]
-                            w3 = env[b3 + lo:b3 + lo + m]
-                            for j in range(m):
-                                ri[j] -= l0 * w0[j] + l1 * w1[j] + l2 * w2[j] + l3 * w3[j]
+                            oi = np.uint64(bi + lo)
+                            o0 = np.uint64(b0 + lo)
+                            o1 = np.uint64(b1 + lo)
+                            o2 = np.uint64(b2 + lo)
+                            o3 = np.uint64(b3 + lo)
+                            for jj in range(urun_hi[t] - lo):
+                                j = np.uint64(jj)
+                                env[oi + j] -= (l0 * env[o0 + j] + l1 * env[o1 + j] + l2 * env[o2 + j]
+                                                + l3 * env[o3 + j])
                         i += 1
         else:
             for s in range(s0, s1):
@@ -600,23 +590,23 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, diag_pos, ba
                             b1 = base[p + 1]
                             for t in range(s0, s1):
                                 lo = urun_lo[t]
-                                m = urun_hi[t] - lo
-                                ri = env[bi + lo:bi + lo + m]
-                                w0 = env[b0 + lo:b0 + lo + m]
-                                w1 = env[b1 + lo:b1 + lo + m]
-                                for j in range(m):
-                                    ri[j] -= l0 * w0[j] + l1 * w1[j]
+                                oi = np.uint64(bi + lo)
+                                o0 = np.uint64(b0 + lo)
+                                o1 = np.uint64(b1 + lo)
+                                for jj in range(urun_hi[t] - lo):
+                                    j = np.uint64(jj)
+                                    env[oi + j] -= l0 * env[o0 + j] + l1 * env[o1 + j]
                             p += 2
                         else:
                             l0 = env[bi + p]
                             b0 = base[p]
                             for t in range(s0, s1):
                                 lo = urun_lo[t]
-                                m = urun_hi[t] - lo
-                                ri = env[bi + lo:bi + lo + m]
-                                w0 = env[b0 + lo:b0 + lo + m]
-                                for j in range(m):
-                                    ri[j] -= l0 * w0[j]
+                                oi = np.uint64(bi + lo)
+                                o0 = np.uint64(b0 + lo)
+                                for jj in range(urun_hi[t] - lo):
+                                    j = np.uint64(jj)
+                                    env[oi + j] -= l0 * env[o0 + j]
                             p += 1
     stats[1] = pmin
     stats[2] = 0.0
@@ -797,11 +787,6 @@ class SkylineLU:
         self._accumulate = bool(np.unique(self._slot).size < self._slot.size)
         self._zero_slots = np.ascontiguousarray(
             structural if self._accumulate else np.setdiff1d(structural, self._slot), dtype=np.int64)
-        diag_pos = np.full(n, -1, np.int64)
-        on_diag = np.flatnonzero(csr_rows == indices)
-        diag_pos[csr_rows[on_diag]] = on_diag
-        self._diag_pos = diag_pos
-
         self._inv_diag = np.zeros(n, np.float64)
         self._work = np.zeros(n, np.float64)
         self._stats = np.zeros(3, np.float64)
@@ -857,7 +842,7 @@ class SkylineLU:
                 raise ValueError(f"SkylineLU.factor: mass must have shape ({self.nnz},), got {mass.shape}")
         self._factored = False
         step = _factor_kernel(data, mass, float(coef), self._slot, self._accumulate, self._zero_slots,
-                              self._diag_pos, self._base, *self._lrun, *self._urun, self._blk_ptr,
+                              self._base, *self._lrun, *self._urun, self._blk_ptr,
                               self._env, self._inv_diag, self.pivot_tol, self._stats)
         if step >= 0:
             raise SingularPivotError(self.perm[step], step, self._stats[2],

@@ -106,7 +106,7 @@ class Problem:
             r = rng.standard_normal((d.size, d.size))
             b = r @ r.T / d.size + 0.1 * np.eye(d.size)
             if kind == "nonsymmetric":
-                b += 0.1 * rng.standard_normal(b.shape)
+                b += 0.03 * rng.standard_normal(b.shape)      # "slightly": follower loads
             blocks.append(b)
         a = self.assemble(blocks)
         if kind == "indefinite":
