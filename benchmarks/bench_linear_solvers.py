@@ -3,7 +3,7 @@
 Patterns: synthetic chains of dense 36×36 element blocks sharing 9 DOFs (randomly numbered),
 a synthetic Stewart-like pattern (6 legs, 2 per platform vertex, platform triangle), and — when the
 scene compiler is importable — real Stewart-platform tangents ``K + 4/Δt² M`` (Δt = 1 ms) with
-1–8 cubic frame elements per leg. Medians over many repetitions, single-threaded BLAS.
+1–8 cubic frame elements per leg and the tangents of the shipped ``scenes/*.yaml``. Medians over many repetitions, single-threaded BLAS.
 
     .venv/bin/python benchmarks/bench_linear_solvers.py [--repeats 400] [--json out.json]
 """
@@ -115,6 +115,20 @@ def stewart_scene(leg_elements):
     return model.nfree, sp.csr_matrix((data, model.indices, model.indptr), shape=(model.nfree,) * 2)
 
 
+def shipped_scene(path):
+    """Tangent of a shipped scene at its reference configuration + 4/Δt² M (Δt = 1 ms)."""
+    from flexmb_core.model.assembly import assemble
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.model.workspace import State, Workspace
+    from flexmb_core.scene import load_scene
+
+    model = compile_scene(load_scene(path))
+    ws, st = Workspace(model), State.at_rest(model)
+    assemble(model, ws, st.q, st.lam, True)
+    data = np.ascontiguousarray(ws.kdata + model.mass_kdata / (0.25 * 1e-3 ** 2))
+    return model.nfree, sp.csr_matrix((data, model.indices, model.indptr), shape=(model.nfree,) * 2)
+
+
 def _median_us(fn, repeats):
     fn()
     times = []
@@ -167,8 +181,10 @@ def main(argv=None):
     try:
         for le in (1, 2, 4, 8):
             cases.append((f"flexmb stewart {le} el/leg", *stewart_scene(le)))
+        for path in sorted((ROOT / "scenes").glob("*.yaml")):
+            cases.append((f"scene {path.stem}", *shipped_scene(path)))
     except Exception as exc:   # the scene compiler is optional here
-        print(f"(real Stewart scenes skipped: {exc})")
+        print(f"(flexmb scenes skipped: {type(exc).__name__}: {exc})")
 
     SkylineLU(2, [0, 2, 4], [0, 1, 0, 1]).factor(np.array([2.0, 1.0, 1.0, 2.0]))   # JIT / cache load
     head = (f"{'case':28s} {'n':>5s} {'ordering':>22s} {'bw':>5s} {'MFMA':>6s} {'factor':>8s} "

@@ -22,7 +22,7 @@ from ..model.assembly import assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
-from ..solvers.linear import SparseLU
+from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from .energy import csr_matvec, energies
 
@@ -47,7 +47,7 @@ class DynamicIntegrator:
         self.ws = ws
         self.spec = spec
         self.am, self.af, self.beta, self.gamma = alpha_parameters(spec)
-        self.lu = SparseLU(model)
+        self.lu = FixedPatternSolver(model)
         n = model.ndof
         self._ma = np.zeros(n)
         self._r = np.zeros(n)
@@ -69,7 +69,7 @@ class DynamicIntegrator:
         if self.spec.initial_acceleration == "consistent":
             csr_matvec(*m.mass_csr, state.v, self._ma)
             rhs = ws.f_ext - ws.r - m.mass_damping * self._ma
-            self.lu.factor(np.ascontiguousarray(m.mass_kdata))
+            self.lu.factor(m.mass_kdata)
             state.a[self._free] = self.lu.solve(rhs[self._free])
         state.atil[:] = state.a
         kin, grav = energies(m, state)
@@ -155,9 +155,8 @@ class DynamicIntegrator:
                 message = f"non-finite residual at Newton iteration {it}"
                 break
             if refresh:
-                np.add(ws.kdata, coef * m.mass_kdata, out=ws.keff)
                 try:
-                    self.lu.factor(ws.keff)
+                    self.lu.factor(ws.kdata, mass=m.mass_kdata, coef=coef)
                 except RuntimeError as exc:
                     self._factored_coef = None
                     message = f"singular tangent at Newton iteration {it} ({exc})"

@@ -14,7 +14,7 @@ from ..model.assembly import assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
-from ..solvers.linear import SparseLU
+from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from .energy import energies
 
@@ -26,7 +26,7 @@ class StaticSolver:
         self.model = model
         self.ws = ws
         self.spec = spec
-        self.lu = SparseLU(model)
+        self.lu = FixedPatternSolver(model)
         self._inv_scale = 1.0 / model.dof_scale[model.free]
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:

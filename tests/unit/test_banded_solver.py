@@ -345,5 +345,6 @@ def test_each_kernel_compiles_one_signature():
                if isinstance(obj, numba.core.registry.CPUDispatcher)}
     assert len(kernels) == 6, sorted(kernels)
     for name, disp in kernels.items():
-        assert len(disp.signatures) == 1, f"{name} compiled {len(disp.signatures)} signatures: {disp.signatures}"
+        assert len(disp.signatures) == 1, \
+            f"{name} compiled {len(disp.signatures)} signatures: {disp.signatures}"
         assert disp._cache.__class__.__name__ != "NullCache", f"{name} lacks cache=True"
