@@ -23,7 +23,7 @@ EXTRAS := dev,ros,ros-build,record,viz,bench
 MSGS_BUILD := $(CURDIR)/build/msgs
 MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.msg msgs/srv/*.srv))
 
-DEMO_CMD ?= $(VENV)/bin/flexmb run scenes/cantilever_b1.yaml --until 2 --json build/demo.json
+DEMO_CMD ?= $(VENV)/bin/flexmb run scenes/stewart_platform.yaml --json build/demo.json
 PYTEST_ARGS ?=
 
 # Environment of every recipe. DDS discovery never leaves the machine (ROS_LOCALHOST_ONLY is

@@ -81,6 +81,7 @@ class _Progress:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .simulator import Simulator
+    from .tracking import PoseTracker
 
     overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
     scene, model = _load(args.scene, overrides)
@@ -89,9 +90,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     sim.initialize()
     until = scene.solver.until
     progress = _Progress(until, not args.quiet)
+    tracker = PoseTracker(model)
+
+    def on_step(s, res):
+        tracker.update(s.state.t, s.state.q)
+        progress(s, res)
+
     error = ""
     try:
-        sim.run(until, callback=progress)
+        sim.run(until, callback=on_step)
     except ConvergenceError as exc:
         error = str(exc)
     finally:
@@ -101,6 +108,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     "until": until, "integrator": scene.solver.integrator, "analysis": scene.solver.analysis,
                     "jit_warmup_s": warm, "completed": not error, "error": error,
                     "outputs": sim.outputs()})
+    if tracker.active:
+        summary["tracking"] = tracker.summary()
     text = json.dumps(summary, indent=2, allow_nan=True)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -112,6 +121,11 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"max {summary['newton_iterations_max']}; unconverged {summary['unconverged_steps']}")
         for k, v in summary["outputs"].items():
             print(f"  {k}: {v}")
+        if tracker.active:
+            tr = summary["tracking"]
+            print(f"  tracking of '{tr['output']}' vs the commanded pose: max position error "
+                  f"{tr['max_position_error_m']:.3e} m (t = {tr['t_of_max_position_error_s']:.3f} s), "
+                  f"rms {tr['rms_position_error_m']:.3e} m, max orientation error {tr['max_orientation_error_rad']:.3e} rad")
     if error:
         print(f"flexmb run: {error}", file=sys.stderr)
         return 2

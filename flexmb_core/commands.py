@@ -35,6 +35,13 @@ class StewartAppendixProgram:
                                                         blend_time=self.blend_time)
         return lengths[0]
 
+    def reference_pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Commanded platform centroid (m) and orientation (w, x, y, z) at ``t`` (s)."""
+        self._t[0] = min(max(t, 0.0), self._stewart.T_END)
+        p, quat = self._stewart.appendix_platform_outputs(self._t, self.geometry, start=self.start,
+                                                          blend_time=self.blend_time)
+        return p[0], quat[0]
+
 
 PROGRAMS = {"stewart_appendix": StewartAppendixProgram}
 
