@@ -14,9 +14,16 @@ from .scene.schema import CommandProgramSpec
 
 
 class StewartAppendixProgram:
-    """Leg lengths of Siqueira & Coda (2019), appendix Eqs. 52–60, held after 20 s."""
+    """Leg lengths of Siqueira & Coda (2019), appendix Eqs. 52–60, held after 20 s.
+
+    The law is tabulated once on a 1 ms grid with one-sided rates at both ends of every interval
+    and evaluated by cubic Hermite interpolation: error ≈ h⁴·max|L⁗|/384 ≈ 1e-15 m, exact at the
+    grid points, and the rate jump of the law at t = 10 s falls on a grid point. Evaluating the
+    vectorized law for one time costs ~200 µs of numpy overhead; the table costs ~2 µs.
+    """
 
     n_actuators = 6
+    grid_step = 1e-3
 
     def __init__(self, spec: CommandProgramSpec):
         from .mechanisms import stewart
@@ -26,18 +33,40 @@ class StewartAppendixProgram:
         self.blend_time = spec.blend_time
         self.geometry = stewart.StewartGeometry.default()
         self.lengths0 = self.geometry.layout().lengths0
+        self.t_end = stewart.T_END
+        n = int(round(self.t_end / self.grid_step))
+        self._grid = np.linspace(0.0, self.t_end, n + 1)
+        eps = 1e-9
+        law = lambda t: stewart.appendix_leg_lengths(np.clip(t, 0.0, self.t_end), self.geometry,  # noqa: E731
+                                                     start=self.start, blend_time=self.blend_time)
+        self._values, _ = law(self._grid)                          # (n+1, 6)
+        _, self._rate_right = law(self._grid[:-1] + eps)           # rate at the start of interval i
+        _, self._rate_left = law(self._grid[1:] - eps)             # rate at the end of interval i
         self._t = np.zeros(1)
 
     def lengths(self, t: float) -> np.ndarray:
         """Commanded lengths (m) of the six legs at ``t`` (s)."""
-        self._t[0] = min(max(t, 0.0), self._stewart.T_END)
+        if t >= self.t_end:
+            return self._values[-1].copy()
+        if t <= 0.0:
+            return self._values[0].copy()
+        h = self.grid_step
+        i = min(int(t / h), self._grid.size - 2)
+        s = (t - self._grid[i]) / h
+        s2, s3 = s * s, s * s * s
+        return ((2 * s3 - 3 * s2 + 1) * self._values[i] + (s3 - 2 * s2 + s) * h * self._rate_right[i]
+                + (-2 * s3 + 3 * s2) * self._values[i + 1] + (s3 - s2) * h * self._rate_left[i])
+
+    def exact_lengths(self, t: float) -> np.ndarray:
+        """The law evaluated directly (reference for the table)."""
+        self._t[0] = min(max(t, 0.0), self.t_end)
         lengths, _ = self._stewart.appendix_leg_lengths(self._t, self.geometry, start=self.start,
                                                         blend_time=self.blend_time)
         return lengths[0]
 
     def reference_pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Commanded platform centroid (m) and orientation (w, x, y, z) at ``t`` (s)."""
-        self._t[0] = min(max(t, 0.0), self._stewart.T_END)
+        self._t[0] = min(max(t, 0.0), self.t_end)
         p, quat = self._stewart.appendix_platform_outputs(self._t, self.geometry, start=self.start,
                                                           blend_time=self.blend_time)
         return p[0], quat[0]

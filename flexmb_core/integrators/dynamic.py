@@ -25,6 +25,7 @@ from ..scene.schema import SolverSpec
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from .energy import csr_matvec, energies
+from .fused import apply_increment, inertial_residual, update_rates
 
 
 def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
@@ -50,10 +51,16 @@ class DynamicIntegrator:
         self.lu = FixedPatternSolver(model)
         n = model.ndof
         self._ma = np.zeros(n)
-        self._r = np.zeros(n)
         self._backup = None
         self._free = model.free
         self._inv_scale = 1.0 / model.dof_scale[model.free]
+        self._q_n = np.zeros(n)
+        self._v_n = np.zeros(n)
+        self._a_n = np.zeros(n)
+        self._at_n = np.zeros(n)
+        self._q_hat = np.zeros(n)
+        self._w = np.zeros(n)
+        self._rf = np.zeros(model.nfree)
         self._factored_coef: float | None = None   # tangent coefficient of the held factorization
         self._tangent_age = 0                       # steps since the last tangent refresh
         self.tangent_updates = 0
@@ -116,42 +123,43 @@ class DynamicIntegrator:
     def _newton(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec
         am, af, beta, gamma = self.am, self.af, self.beta, self.gamma
+        c_tilde = 1.0 / (beta * dt * dt)
         c_a = (1.0 - am) / ((1.0 - af) * beta * dt * dt)
         c_v = gamma / (beta * dt)
         c_m = m.mass_damping
         free = self._free
-        q_n = state.q.copy()
-        v_n = state.v.copy()
-        a_n = state.a.copy()
-        at_n = state.atil.copy()
-        # q ↦ ã(q) = (q − q_hat)/(βΔt²)
-        q_hat = q_n + dt * v_n + dt * dt * (0.5 - beta) * at_n
+        q_n, v_n, a_n, at_n, q_hat = self._q_n, self._v_n, self._a_n, self._at_n, self._q_hat
+        q_n[:] = state.q
+        v_n[:] = state.v
+        a_n[:] = state.a
+        at_n[:] = state.atil
+        # q ↦ ã(q) = (q − q_hat)/(βΔt²); predictor: constant pseudo-acceleration (prescribed DOFs stay).
+        np.multiply(at_n, (0.5 - beta) * dt * dt, out=q_hat)
+        q_hat += q_n
+        q_hat += dt * v_n
         t_new = state.t + dt
         state.lam[:] = lam_new
         update_load_scales(m, ws, t_new)
         q = state.q
-        q[:] = q_hat + beta * dt * dt * at_n      # constant pseudo-acceleration predictor
-        prescribed_mask = m.free_index < 0
-        q[prescribed_mask] = q_n[prescribed_mask]
+        q[free] = q_hat[free] + (beta * dt * dt) * at_n[free]
         coef = c_a + c_m * c_v
         converged = False
         inc = math.inf
         rel = math.inf
         message = ""
+        strain = 0.0
         it = 0
         modified = spec.newton == "modified"
         refresh = (not modified or self._factored_coef != coef
                    or self._tangent_age >= spec.tangent_max_age)
         prev_inc = math.inf
+        mi, mj, mv = m.mass_csr
         for it in range(1, spec.max_iterations + 1):
-            atil = (q - q_hat) / (beta * dt * dt)
-            a = ((1.0 - am) * atil + am * at_n - af * a_n) / (1.0 - af)
-            v = v_n + dt * ((1.0 - gamma) * at_n + gamma * atil)
-            assemble(m, ws, q, state.lam, refresh)
-            csr_matvec(*m.mass_csr, a + c_m * v, self._ma)
-            r = ws.r + self._ma - ws.f_ext
-            rf = r[free]
-            if not np.all(np.isfinite(rf)):
+            strain = assemble(m, ws, q, state.lam, refresh)
+            nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
+                                        mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf)
+            rel = nr / ref
+            if not math.isfinite(nr):
                 message = f"non-finite residual at Newton iteration {it}"
                 break
             if refresh:
@@ -164,11 +172,8 @@ class DynamicIntegrator:
                 self._factored_coef = coef
                 self._tangent_age = 0
                 self.tangent_updates += 1
-            dq = self.lu.solve(-rf)
-            q[free] += dq
-            inc = float(np.max(np.abs(dq) * self._inv_scale)) if dq.size else 0.0
-            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(self._ma[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-            rel = float(np.linalg.norm(rf) / ref)
+            dq = self.lu.solve(self._rf)
+            inc = apply_increment(q, free, dq, -1.0, self._inv_scale)
             if not math.isfinite(inc):
                 message = f"non-finite increment at Newton iteration {it}"
                 break
@@ -180,18 +185,13 @@ class DynamicIntegrator:
             prev_inc = inc
         if not converged and not message:
             message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e}, tolerance {spec.tolerance:.1e})"
-        atil = (q - q_hat) / (beta * dt * dt)
-        state.a[:] = ((1.0 - am) * atil + am * at_n - af * a_n) / (1.0 - af)
-        state.v[:] = v_n + dt * ((1.0 - gamma) * at_n + gamma * atil)
-        state.atil[:] = atil
+        update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, state.a, state.v, state.atil)
         state.t = t_new
         if not converged:
             self._factored_coef = None   # a failed step never leaves a stale tangent behind
             return StepResult(False, it, rel, inc, 1, message=message)
         self._tangent_age += 1
-        strain = assemble(m, ws, q, state.lam, False)
-        csr_matvec(*m.mass_csr, state.a + c_m * state.v, self._ma)
-        r = (ws.r + self._ma - ws.f_ext)[free]
-        ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(self._ma[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+        # Energies and residual are those of the last evaluated iterate: the accepted q differs from
+        # it by one increment ≤ tolerance (saves a residual assembly per step).
         kin, grav = energies(m, state)
-        return StepResult(True, it, float(np.linalg.norm(r) / ref), inc, 1, kin, strain, grav)
+        return StepResult(True, it, rel, inc, 1, kin, strain, grav)

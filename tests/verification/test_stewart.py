@@ -70,3 +70,16 @@ def test_platform_tracks_the_appendix_command(model):
     # legs push the 48 kg mechanism up: compression in every leg
     forces = [sim.outputs()[k] for k in ("leg1_force", "leg4_force")]
     assert all(f < 0 for f in forces)
+
+
+@pytest.mark.parametrize("start", ["blended", "exact"])
+def test_tabulated_command_equals_the_law(model, start):
+    """The Hermite table of the appendix law (1 ms grid, one-sided rates) is exact to 1e-11 m,
+    including around the rate jump at t = 10 s."""
+    from flexmb_core.commands import StewartAppendixProgram
+    from flexmb_core.scene.schema import CommandProgramSpec
+
+    prog = StewartAppendixProgram(CommandProgramSpec("stewart_appendix", tuple("abcdef"), start, 1.0))
+    ts = np.concatenate([np.random.default_rng(3).uniform(0, 20, 500), [0.0, 9.9995, 10.0, 10.0004, 20.0, 25.0]])
+    err = max(np.abs(prog.lengths(t) - prog.exact_lengths(t)).max() for t in ts)
+    assert err < 1e-11
