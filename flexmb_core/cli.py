@@ -159,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene")
     r.add_argument("--until", type=float, help="end time (s); default: the scene's solver.until")
     r.add_argument("--dt", type=float, help="time step (s); default: the scene's solver.dt")
-    r.add_argument("--integrator", choices=("newmark", "generalized_alpha"))
+    r.add_argument("--integrator", choices=("newmark", "generalized_alpha", "chung_hulbert"))
     r.add_argument("--json", metavar="OUT", help="write the run summary (JSON) here")
     r.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
     r.set_defaults(func=cmd_run)

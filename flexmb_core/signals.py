@@ -25,6 +25,12 @@ def evaluate(sig: Signal, t: float) -> float:
         return sig.value
     if sig.kind == "ramp":
         return sig.start + (sig.end - sig.start) * ramp_shape(sig.shape, (t - sig.t0) / sig.duration)
+    if sig.kind == "spin_up":
+        # θ(t) = (ω/T)[t²/2 + (T/2π)²(cos(2πt/T) − 1)] for t ≤ T, ω t − ωT/2 after (Simo & Vu-Quoc 1986)
+        w, T = sig.amplitude, sig.duration
+        if t <= T:
+            return w / T * (0.5 * t * t + (T / (2.0 * math.pi)) ** 2 * (math.cos(2.0 * math.pi * t / T) - 1.0))
+        return w * t - 0.5 * w * T
     if sig.kind == "sine":
         return sig.offset + sig.amplitude * math.sin(2.0 * math.pi * sig.frequency * t + sig.phase)
     return float(np.interp(t, sig.table_t, sig.table_v))

@@ -7,6 +7,11 @@ Unknowns at t_{n+1}: q. With the pseudo-acceleration ã,
     residual  r(q) = f_int(q; λ_{n+1}) + M (a + c_m v) − f_ext(t_{n+1})
     tangent   K + (c_a + c_m c_v) M,  c_a = (1−αm)/((1−αf) β Δt²),  c_v = γ/(β Δt)
 
+``chung_hulbert`` is the original generalized-α (Chung & Hulbert 1993): inertia at t_{n+1−αm} and
+internal/external forces at the *interpolated configuration* q_{n+1−αf} = (1−αf) q_{n+1} + αf q_n.
+Interpolating absolute positions and vectors of a rotating body shortens it, so this form is not
+objective for positional unknowns (SPEC §1.7); it is kept to demonstrate that, not for use.
+
 Newton is either full (tangent every iteration) or modified: the factorization is kept across
 iterations and steps while each increment shrinks by at least ``modified_contraction``, and is
 refreshed when it does not, when Δt changes, or after ``tangent_max_age`` steps.
@@ -18,7 +23,7 @@ import math
 
 import numpy as np
 
-from ..model.assembly import assemble, update_load_scales
+from ..model.assembly import apply_drives, assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
@@ -36,6 +41,8 @@ def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
     am = (2.0 * rho - 1.0) / (rho + 1.0)
     af = rho / (rho + 1.0)
     gamma = 0.5 + af - am
+    if spec.integrator == "chung_hulbert":
+        return am, af, 0.25 * (1.0 - am + af) ** 2, gamma
     beta = 0.25 * (gamma + 0.5) ** 2
     return am, af, beta, gamma
 
@@ -60,6 +67,7 @@ class DynamicIntegrator:
         self._at_n = np.zeros(n)
         self._q_hat = np.zeros(n)
         self._w = np.zeros(n)
+        self._q_eval = np.zeros(n)
         self._rf = np.zeros(model.nfree)
         self._factored_coef: float | None = None   # tangent coefficient of the held factorization
         self._tangent_age = 0                       # steps since the last tangent refresh
@@ -71,6 +79,7 @@ class DynamicIntegrator:
         self._factored_coef = None
         m, ws = self.model, self.ws
         update_load_scales(m, ws, state.t)
+        apply_drives(m, state.q, state.t)
         strain = assemble(m, ws, state.q, state.lam, False)
         state.a[:] = 0.0
         if self.spec.initial_acceleration == "consistent":
@@ -139,9 +148,19 @@ class DynamicIntegrator:
         q_hat += dt * v_n
         t_new = state.t + dt
         state.lam[:] = lam_new
-        update_load_scales(m, ws, t_new)
+        ch = spec.integrator == "chung_hulbert"
+        update_load_scales(m, ws, t_new - af * dt if ch else t_new)
         q = state.q
         q[free] = q_hat[free] + (beta * dt * dt) * at_n[free]
+        apply_drives(m, q, t_new)
+        if ch:
+            # Newmark kinematics with a itself (ã ≡ a); inertia (1−αm) a_{n+1} + αm a_n through the
+            # fused kernel with αf = 0; forces at q_{n+1−αf}; tangent (1−αf) K + (1−αm)/(βΔt²) M.
+            c_a = (1.0 - am) / (beta * dt * dt)
+            k_scale, am_r, af_r = 1.0 - af, am, 0.0
+        else:
+            k_scale, am_r, af_r = 1.0, am, af
+        q_eval = self._q_eval if ch else q
         coef = c_a + c_m * c_v
         converged = False
         inc = math.inf
@@ -155,14 +174,19 @@ class DynamicIntegrator:
         prev_inc = math.inf
         mi, mj, mv = m.mass_csr
         for it in range(1, spec.max_iterations + 1):
-            strain = assemble(m, ws, q, state.lam, refresh)
-            nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
+            if ch:
+                np.multiply(q, 1.0 - af, out=q_eval)
+                q_eval += af * q_n
+            strain = assemble(m, ws, q_eval, state.lam, refresh)
+            nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am_r, af_r, gamma, dt, c_m,
                                         mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf)
             rel = nr / ref
             if not math.isfinite(nr):
                 message = f"non-finite residual at Newton iteration {it}"
                 break
             if refresh:
+                if k_scale != 1.0:
+                    ws.kdata *= k_scale
                 try:
                     self.lu.factor(ws.kdata, mass=m.mass_kdata, coef=coef)
                 except RuntimeError as exc:
@@ -185,7 +209,10 @@ class DynamicIntegrator:
             prev_inc = inc
         if not converged and not message:
             message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e}, tolerance {spec.tolerance:.1e})"
-        update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, state.a, state.v, state.atil)
+        if ch:
+            update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, 0.0, 0.0, gamma, dt, state.a, state.v, state.atil)
+        else:
+            update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, state.a, state.v, state.atil)
         state.t = t_new
         if not converged:
             self._factored_coef = None   # a failed step never leaves a stale tangent behind

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ..model.assembly import assemble, update_load_scales
+from ..model.assembly import apply_drives, assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
@@ -61,6 +61,7 @@ class StaticSolver:
         state.t = t
         update_load_scales(m, ws, t)
         q = state.q
+        apply_drives(m, q, t)
         inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
         for it in range(1, spec.max_iterations + 1):
             assemble(m, ws, q, lam, True)

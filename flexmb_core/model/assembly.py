@@ -29,6 +29,25 @@ def update_load_scales(model: Model, ws: Workspace, t: float) -> None:
         ws.f_ext += g * model.gravity_vector
 
 
+def apply_drives(model: Model, q: np.ndarray, t: float) -> None:
+    """Set the prescribed positions and section vectors of driven supports at time ``t``."""
+    d = model.drives
+    if d is None:
+        return
+    for k in range(d.y_ids.shape[0]):
+        s = 0.0 if d.distance[k] is None else evaluate(d.distance[k], t)
+        q[d.y_ids[k]] = d.y0[k] + s * d.direction[k]
+    for j in range(d.v_ids.shape[0]):
+        k = d.v_drive[j]
+        if d.angle[k] is None:
+            continue
+        th = evaluate(d.angle[k], t)
+        a = d.axis[k]
+        v0 = d.v0[j]
+        c, sn = np.cos(th), np.sin(th)
+        q[d.v_ids[j]] = v0 * c + np.cross(a, v0) * sn + a * (a @ v0) * (1.0 - c)
+
+
 def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool) -> float:
     """Internal forces minus configuration-dependent loads into ``ws.r`` (full), and the tangent
     of that into ``ws.kdata`` (free–free CSR) when ``want_k``. Returns the strain energy (J).

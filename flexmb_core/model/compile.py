@@ -13,7 +13,7 @@ from .. import sections as secmod
 from ..errors import SceneError
 from ..scene.schema import Member, Scene, Signal
 from .frame_geometry import frame_element_geometry, frame_element_mass
-from .model import Actuators, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
+from .model import Actuators, Drives, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
 
 
 def _freeze(*arrays: np.ndarray) -> None:
@@ -157,19 +157,28 @@ def compile_scene(scene: Scene) -> Model:
 
     # -- prescribed DOFs ------------------------------------------------------------------
     fixed = np.zeros(ndof, dtype=bool)
+    drive_rows: list[tuple] = []
+    drive_vectors: list[tuple] = []
     for s in scene.supports:
         n = node_lookup[s.node]
-        if s.type in ("clamp", "ball"):
+        if s.type in ("clamp", "ball", "driven"):
             fixed[node_ydofs[n]] = True
-        if s.type in ("clamp", "fixed_vector"):
+        if s.type == "driven":
+            drive_rows.append((node_ydofs[n], np.asarray(scene.nodes[s.node], dtype=float),
+                               s.direction or (0.0, 0.0, 0.0), s.distance, s.axis or (0.0, 0.0, 1.0), s.angle))
+        if s.type in ("clamp", "fixed_vector", "driven"):
             for mi in member_infos:
                 if s.member is not None and mi.name != s.member:
                     continue
                 for k in np.nonzero(mi.nodes == n)[0]:
                     if mi.vdofs[k, 0] < 0:
                         continue
-                    if s.type == "clamp":
+                    if s.type in ("clamp", "driven"):
                         fixed[mi.vdofs[k]] = True
+                        if s.type == "driven":
+                            for off in (0, 3):
+                                ids = mi.vdofs[k, off:off + 3]
+                                drive_vectors.append((ids, q0[ids[0]:ids[0] + 3], len(drive_rows) - 1))
                     else:
                         off = 0 if s.vector == "v1" else 3
                         fixed[mi.vdofs[k, off:off + 3]] = True
@@ -331,6 +340,15 @@ def compile_scene(scene: Scene) -> Model:
         gravity_signal = scene.gravity.signal
     moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map)
 
+    drives = None
+    if drive_rows:
+        drives = Drives(np.array([r[0] for r in drive_rows], dtype=np.int64), np.array([r[1] for r in drive_rows]),
+                        np.array([r[2] for r in drive_rows], dtype=float), tuple(r[3] for r in drive_rows),
+                        np.array([r[4] for r in drive_rows], dtype=float), tuple(r[5] for r in drive_rows),
+                        np.array([v[0] for v in drive_vectors], dtype=np.int64).reshape(-1, 3),
+                        np.array([v[1] for v in drive_vectors], dtype=float).reshape(-1, 3),
+                        np.array([v[2] for v in drive_vectors], dtype=np.int64))
+        _freeze(drives.y_ids, drives.y0, drives.direction, drives.axis, drives.v_ids, drives.v0, drives.v_drive)
     program, program_index = None, np.zeros(0, dtype=np.int64)
     if scene.commands is not None:
         from ..commands import build_program
@@ -344,7 +362,7 @@ def compile_scene(scene: Scene) -> Model:
     return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
                  tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
-                 scene.mass_damping, total_mass, program, program_index, node_lookup, member_lookup)
+                 scene.mass_damping, total_mass, drives, program, program_index, node_lookup, member_lookup)
 
 
 def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map) -> MomentLoads:

@@ -93,6 +93,26 @@ class Actuators:
 
 
 @dataclass(frozen=True)
+class Drives:
+    """Prescribed motion: node positions ``Y(t) = Y⁰ + d s(t)`` and section vectors
+    ``V(t) = R(a, θ(t)) V⁰`` (Rodrigues), one entry per driven support.
+
+    ``y_ids (nd, 3)``, ``y0 (nd, 3)``, ``direction (nd, 3)``, ``axis (nd, 3)``;
+    ``v_ids (nv, 3)``, ``v0 (nv, 3)``, ``v_drive (nv,)`` the drive that turns each vector.
+    """
+
+    y_ids: np.ndarray
+    y0: np.ndarray
+    direction: np.ndarray
+    distance: tuple[Signal | None, ...]
+    axis: np.ndarray
+    angle: tuple[Signal | None, ...]
+    v_ids: np.ndarray
+    v0: np.ndarray
+    v_drive: np.ndarray
+
+
+@dataclass(frozen=True)
 class Model:
     """Everything the time loop reads; nothing in it changes after :func:`compile_scene`."""
 
@@ -119,6 +139,7 @@ class Model:
     node_ydofs: np.ndarray          # (nnodes, 3)
     mass_damping: float
     total_mass: float
+    drives: Drives | None = None        # prescribed motion, or None
     program: object | None = None       # command program (flexmb_core.commands), or None
     program_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     node_lookup: dict[str, int] = field(default_factory=dict)

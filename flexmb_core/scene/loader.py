@@ -155,9 +155,10 @@ def signal(n: Node, *, default_value: float = 1.0) -> Signal:
     if isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
         return Signal("constant", value=n.number())
     kind = n.mapping({"kind", "value", "start", "end", "t0", "duration", "shape", "offset",
-                      "amplitude", "frequency", "phase", "t", "values"}, {"kind"}
-                     ).get("kind").string(("constant", "ramp", "sine", "table"))
+                      "amplitude", "frequency", "phase", "t", "values", "rate"}, {"kind"}
+                     ).get("kind").string(("constant", "ramp", "sine", "table", "spin_up"))
     keys = {"constant": {"value"}, "ramp": {"start", "end", "t0", "duration", "shape"},
+            "spin_up": {"rate", "duration"},
             "sine": {"offset", "amplitude", "frequency", "phase"}, "table": {"t", "values"}}[kind]
     extra = sorted(k for k in n.value if k not in keys | {"kind"})
     if extra:
@@ -169,6 +170,9 @@ def signal(n: Node, *, default_value: float = 1.0) -> Signal:
                       t0=n.get("t0", 0.0).number(nonneg=True),
                       duration=n.get("duration").number(positive=True, unit="s"),
                       shape=n.get("shape", "linear").string(("linear", "smooth", "cycloidal")))
+    if kind == "spin_up":
+        return Signal("spin_up", amplitude=n.get("rate").number(unit="rad/s"),
+                      duration=n.get("duration").number(positive=True, unit="s"))
     if kind == "sine":
         return Signal("sine", offset=n.get("offset", 0.0).number(), amplitude=n.get("amplitude").number(),
                       frequency=n.get("frequency").number(nonneg=True, unit="Hz"),
@@ -235,8 +239,8 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
 
 
 def _support(n: Node, nodes, members) -> Support:
-    n.mapping({"node", "type", "member", "vector"}, {"node", "type"})
-    typ = n.get("type").string(("clamp", "ball", "fixed_vector"))
+    n.mapping({"node", "type", "member", "vector", "rotation", "translation"}, {"node", "type"})
+    typ = n.get("type").string(("clamp", "ball", "fixed_vector", "driven"))
     node = n.get("node").name_in(nodes, "node")
     member = n.get("member").name_in(members, "member") if n.has("member") else None
     vector = None
@@ -248,7 +252,28 @@ def _support(n: Node, nodes, members) -> Support:
         raise n.fail(f"'vector' applies to type fixed_vector only (type is '{typ}')", "vector")
     if member is not None and node not in (members[member].start, members[member].end):
         raise n.fail(f"node '{node}' is not an end of member '{member}'")
-    return Support(node, typ, member, vector)
+    axis = angle = direction = distance = None
+    if typ == "driven":
+        if not (n.has("rotation") or n.has("translation")):
+            raise n.fail("a driven support needs 'rotation' and/or 'translation'")
+        if n.has("rotation"):
+            r = n.get("rotation").mapping({"axis", "angle"}, {"axis", "angle"})
+            axis = _unit3(r.get("axis").vector(3, nonzero=True))
+            angle = signal(r.get("angle"))
+        if n.has("translation"):
+            tr = n.get("translation").mapping({"direction", "distance"}, {"direction", "distance"})
+            direction = _unit3(tr.get("direction").vector(3, nonzero=True))
+            distance = signal(tr.get("distance"))
+    else:
+        for k in ("rotation", "translation"):
+            if n.has(k):
+                raise n.fail(f"'{k}' applies to type driven only (type is '{typ}')", k)
+    return Support(node, typ, member, vector, axis, angle, direction, distance)
+
+
+def _unit3(v: tuple[float, ...]) -> tuple[float, float, float]:
+    norm = math.sqrt(sum(x * x for x in v))
+    return (v[0] / norm, v[1] / norm, v[2] / norm)
 
 
 def _loads(n: Node, nodes, members):
@@ -292,7 +317,7 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
     d = SolverSpec()
     s = SolverSpec(
         analysis=n.get("analysis", d.analysis).string(("dynamic", "static")),
-        integrator=n.get("integrator", d.integrator).string(("newmark", "generalized_alpha")),
+        integrator=n.get("integrator", d.integrator).string(("newmark", "generalized_alpha", "chung_hulbert")),
         dt=n.get("dt", d.dt).number(positive=True, unit="s"),
         until=n.get("until", d.until).number(positive=True, unit="s"),
         beta=n.get("beta", d.beta).number(positive=True, hi=0.5),

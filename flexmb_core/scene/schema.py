@@ -11,7 +11,8 @@ Vec3 = tuple[float, float, float]
 class Signal:
     """A scalar function of time.
 
-    kinds: ``constant`` (value), ``ramp`` (start → end over [t0, t0+duration], shape linear /
+    kinds: ``spin_up`` (Simo–Vu-Quoc angle law: rate ramps smoothly to ``amplitude`` rad/s over
+    ``duration``, then constant), ``constant`` (value), ``ramp`` (start → end over [t0, t0+duration], shape linear /
     smooth (C² quintic) / cycloidal (C², SPEC §4.2)), ``sine`` (offset + amplitude·sin(2π f t + phase)),
     ``table`` (piecewise linear in (t, value), held outside).
     """
@@ -83,9 +84,13 @@ class Member:
 @dataclass(frozen=True)
 class Support:
     node: str
-    type: str                        # clamp | ball | fixed_vector
+    type: str                        # clamp | ball | fixed_vector | driven
     member: str | None = None
     vector: str | None = None        # v1 | v2 (fixed_vector)
+    axis: tuple[float, float, float] | None = None        # driven: rotation axis (unit)
+    angle: Signal | None = None                           # driven: rotation angle θ(t) (rad)
+    direction: tuple[float, float, float] | None = None   # driven: translation direction (unit)
+    distance: Signal | None = None                        # driven: translation s(t) (m)
 
 
 @dataclass(frozen=True)
@@ -122,7 +127,7 @@ class Gravity:
 @dataclass(frozen=True)
 class SolverSpec:
     analysis: str = "dynamic"        # dynamic | static
-    integrator: str = "newmark"      # newmark | generalized_alpha
+    integrator: str = "newmark"      # newmark | generalized_alpha (Arnold–Brüls) | chung_hulbert
     dt: float = 1e-3
     until: float = 1.0
     beta: float = 0.25
