@@ -216,12 +216,14 @@ def frame_element(qe, dax, dsec, w, nsec, mat, lam, want_k, want_dlam,
 
 
 @njit(cache=True)
-def frame_group(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, smap, want_k,
+def frame_group(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, smap, want_k, want_dlam,
                 r, kdata, d, fp, ep, bmat, gbar, qe, re, ke):
     """Loop over one frame group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.
 
     ``edofs (ne, 9n)`` global DOF ids; ``act (ne,)`` actuator id or −1; ``lam_act`` stretch per
     actuator; ``smap (ne, (9n)²)`` position of each local entry in ``kdata`` (−1: prescribed).
+    ``want_dlam`` must be passed in (False) rather than written as a literal: a literal constant
+    in a call between njit functions is typed ``Literal[bool]`` and compiles a second signature.
     Returns the group's strain energy (J).
     """
     ne = edofs.shape[0]
@@ -233,7 +235,7 @@ def frame_group(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, smap, want_k,
         lam = 1.0
         if act[e] >= 0:
             lam = lam_act[act[e]]
-        u, _ = frame_element(qe, dax[e], dsec[e], w[e], nsec, mat[e], lam, want_k, False,
+        u, _ = frame_element(qe, dax[e], dsec[e], w[e], nsec, mat[e], lam, want_k, want_dlam,
                              d, fp, ep, bmat, gbar, re, ke)
         energy += u
         for i in range(nloc):
@@ -250,9 +252,11 @@ def frame_group(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, smap, want_k,
 
 
 @njit(cache=True)
-def frame_group_actuator_dudlam(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, out,
+def frame_group_actuator_dudlam(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, want_k, want_dlam, out,
                                 d, fp, ep, bmat, gbar, qe, re, ke):
-    """Accumulate dU/dλ of every actuated element into ``out[actuator]`` (J)."""
+    """Accumulate dU/dλ of every actuated element into ``out[actuator]`` (J).
+
+    Callers pass ``want_k = False, want_dlam = True`` (as arguments, see :func:`frame_group`)."""
     ne = edofs.shape[0]
     nloc = edofs.shape[1]
     for e in range(ne):
@@ -260,8 +264,8 @@ def frame_group_actuator_dudlam(q, edofs, dax, dsec, w, nsec, mat, act, lam_act,
             continue
         for i in range(nloc):
             qe[i] = q[edofs[e, i]]
-        _, dl = frame_element(qe, dax[e], dsec[e], w[e], nsec, mat[e], lam_act[act[e]], False,
-                              True, d, fp, ep, bmat, gbar, re, ke)
+        _, dl = frame_element(qe, dax[e], dsec[e], w[e], nsec, mat[e], lam_act[act[e]], want_k,
+                              want_dlam, d, fp, ep, bmat, gbar, re, ke)
         out[act[e]] += dl
 
 

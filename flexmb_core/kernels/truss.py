@@ -81,12 +81,13 @@ def truss_group(q, edofs, l0, ea, act, lam_act, smap, want_k, r, kdata, qe, re, 
 
 
 @njit(cache=True)
-def truss_group_actuator_dudlam(q, edofs, l0, ea, act, lam_act, out, qe, re, ke):
-    """Accumulate dU/dλ of every actuated bar into ``out[actuator]`` (J)."""
+def truss_group_actuator_dudlam(q, edofs, l0, ea, act, lam_act, want_k, out, qe, re, ke):
+    """Accumulate dU/dλ of every actuated bar into ``out[actuator]`` (J); ``want_k`` = False is
+    an argument, not a literal (a literal compiles a second signature of the element kernel)."""
     for e in range(edofs.shape[0]):
         if act[e] < 0:
             continue
         for i in range(6):
             qe[i] = q[edofs[e, i]]
-        _, dl = truss_element(qe, l0[e], ea[e], lam_act[act[e]], False, re, ke)
+        _, dl = truss_element(qe, l0[e], ea[e], lam_act[act[e]], want_k, re, ke)
         out[act[e]] += dl

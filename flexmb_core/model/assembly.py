@@ -59,7 +59,7 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
         ws.kdata[:] = 0.0
     energy = 0.0
     for g, sc in zip(model.frame_groups, ws.frame_scratch):
-        energy += frame_group(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, g.smap, want_k,
+        energy += frame_group(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, g.smap, want_k, False,
                               ws.r, ws.kdata, *sc)
     if model.truss is not None:
         t = model.truss
@@ -80,8 +80,9 @@ def actuator_dudlam(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray)
     ws.dudlam[:] = 0.0
     for g, sc in zip(model.frame_groups, ws.frame_scratch):
         if np.any(g.act >= 0):
-            frame_group_actuator_dudlam(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, ws.dudlam, *sc)
+            frame_group_actuator_dudlam(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, False, True,
+                                        ws.dudlam, *sc)
     if model.truss is not None and np.any(model.truss.act >= 0):
         t = model.truss
-        truss_group_actuator_dudlam(q, t.edofs, t.l0, t.ea, t.act, lam, ws.dudlam, *ws.truss_scratch)
+        truss_group_actuator_dudlam(q, t.edofs, t.l0, t.ea, t.act, lam, False, ws.dudlam, *ws.truss_scratch)
     return ws.dudlam

@@ -144,6 +144,17 @@ def compile_scene(scene: Scene) -> Model:
         if mem.kind == "actuator" and mem.arc_center is not None:
             raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
         member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
+    if scene.joints:
+        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup)
+        keep = np.unique(remap)
+        q0 = [q0[i] for i in keep]
+        scale_kind = [scale_kind[i] for i in keep]
+        ndof = keep.size
+        compact = np.searchsorted(keep, remap)
+        ydof = [int(compact[y]) if y >= 0 else -1 for y in ydof]
+        member_infos = [MemberInfo(mi.name, mi.kind, mi.nodes, compact[mi.ydofs],
+                                   np.where(mi.vdofs >= 0, compact[np.maximum(mi.vdofs, 0)], -1), mi.length)
+                        for mi in member_infos]
     unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
     if unused:
         raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member")
@@ -166,6 +177,13 @@ def compile_scene(scene: Scene) -> Model:
         if s.type == "driven":
             drive_rows.append((node_ydofs[n], np.asarray(scene.nodes[s.node], dtype=float),
                                s.direction or (0.0, 0.0, 0.0), s.distance, s.axis or (0.0, 0.0, 1.0), s.angle))
+        if s.type == "revolute":
+            fixed[node_ydofs[n]] = True
+            mi = member_infos[member_lookup[s.member]]
+            k = int(np.nonzero(mi.nodes == n)[0][0])
+            _, _, v1, v2 = member_geom[s.member]
+            off = _axis_offset(f"{scene.source}:supports", s.member, s.node, v1[k], v2[k], np.asarray(s.axis))
+            fixed[mi.vdofs[k, off:off + 3]] = True
         if s.type in ("clamp", "fixed_vector", "driven"):
             for mi in member_infos:
                 if s.member is not None and mi.name != s.member:
@@ -363,6 +381,58 @@ def compile_scene(scene: Scene) -> Model:
                  tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
                  scene.mass_damping, total_mass, drives, program, program_index, node_lookup, member_lookup)
+
+
+def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:
+    """0 if V1 lies on ``axis``, 3 if V2 does (same sense); otherwise a SceneError with a hint."""
+    for off, v in ((0, v1), (3, v2)):
+        if v @ axis > 1.0 - 1e-9:
+            return off
+    raise SceneError(where, f"member '{member}' has no section vector along the axis {axis.tolist()} at node "
+                            f"'{node}' (V1 = {np.round(v1, 6).tolist()}, V2 = {np.round(v2, 6).tolist()}); "
+                            "set the member's 'up' to the axis so that V2 lies on it")
+
+
+def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup) -> np.ndarray:
+    """For every DOF, the DOF it is merged into by the scene's joints (union–find roots)."""
+    parent = np.arange(ndof)
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    infos = {mi.name: mi for mi in member_infos}
+    for j_idx, j in enumerate(scene.joints):
+        where = f"{scene.source}:joints[{j_idx}]"
+        if j.type == "spherical":
+            continue                                   # shared nodes already share positions
+        n = node_lookup[j.node]
+        first = None
+        for name in j.members:
+            mi = infos[name]
+            k = int(np.nonzero(mi.nodes == n)[0][0])
+            _, _, v1, v2 = member_geom[name]
+            if j.type == "rigid":
+                ids = mi.vdofs[k]
+                frame = np.concatenate((v1[k], v2[k]))
+            else:
+                axis = np.asarray(j.axis)
+                off = _axis_offset(where, name, j.node, v1[k], v2[k], axis)
+                ids = mi.vdofs[k, off:off + 3]
+                frame = axis
+            if first is None:
+                first = (name, ids, frame)
+                continue
+            if j.type == "rigid" and not np.allclose(frame, first[2], atol=1e-9):
+                raise SceneError(where, f"members '{first[0]}' and '{name}' have different section frames at "
+                                        f"'{j.node}': sharing vectors is rigid only for collinear, equally "
+                                        "oriented members (a rigid corner needs Lagrange multipliers, not yet "
+                                        "supported); align them with 'up' or use separate joints")
+            for a, b in zip(first[1], ids):
+                parent[find(int(b))] = find(int(a))
+    return np.array([find(i) for i in range(ndof)], dtype=np.int64)
 
 
 def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map) -> MomentLoads:

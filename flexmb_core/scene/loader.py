@@ -14,7 +14,7 @@ import yaml
 
 from ..errors import SceneError
 from .reader import Node
-from .schema import (ActuatorSpec, CommandProgramSpec, Force, Gravity, MassOverride, Material, Member, Moment,
+from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
 
 OUTPUT_KINDS = {
@@ -68,7 +68,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     """Validate a scene given as nested dicts (as parsed from YAML)."""
     root = Node(data, "", source).mapping(
         {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
-         "point_masses", "damping", "solver", "outputs", "commands"},
+         "point_masses", "damping", "solver", "outputs", "commands", "joints"},
         {"name", "materials", "sections", "nodes", "members"})
     name = root.get("name").string()
     description = root.get("description", "").value
@@ -94,8 +94,30 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     solver = _solver(root.get("solver", {}), overrides or {})
     outputs = tuple(_output(k, n, nodes, members) for k, n in root.get("outputs", {}).items())
     commands = _commands(root.get("commands"), members) if root.has("commands") else None
+    joints = tuple(_joint(n, nodes, members) for n in root.get("joints", []).list())
     return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
-                 moments, pmasses, gravity, c_m, solver, outputs, commands)
+                 moments, pmasses, gravity, c_m, solver, outputs, commands, joints)
+
+
+def _joint(n: Node, nodes, members) -> Joint:
+    n.mapping({"type", "node", "members", "axis"}, {"type", "node", "members"})
+    typ = n.get("type").string(("spherical", "revolute", "rigid"))
+    node = n.get("node").name_in(nodes, "node")
+    mems = tuple(m.name_in(members, "member") for m in n.get("members").list())
+    if len(mems) < 2 or len(set(mems)) != len(mems):
+        raise n.fail(f"a joint connects at least two distinct members, got {list(mems)}", "members")
+    for m in mems:
+        mem = members[m]
+        if node not in (mem.start, mem.end) and node not in mem.via:
+            raise n.fail(f"member '{m}' does not pass through node '{node}'", "members")
+        if typ != "spherical" and (mem.kind == "truss" or (mem.actuator and mem.actuator.variant == "bar")):
+            raise n.fail(f"member '{m}' is a bar: it has no section vectors for a {typ} joint", "members")
+    axis = None
+    if typ == "revolute":
+        axis = _unit3(n.get("axis").vector(3, nonzero=True))
+    elif n.has("axis"):
+        raise n.fail(f"'axis' applies to revolute joints only (type is '{typ}')", "axis")
+    return Joint(typ, node, mems, axis)
 
 
 def _commands(n: Node, members) -> CommandProgramSpec:
@@ -239,8 +261,8 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
 
 
 def _support(n: Node, nodes, members) -> Support:
-    n.mapping({"node", "type", "member", "vector", "rotation", "translation"}, {"node", "type"})
-    typ = n.get("type").string(("clamp", "ball", "fixed_vector", "driven"))
+    n.mapping({"node", "type", "member", "vector", "rotation", "translation", "axis"}, {"node", "type"})
+    typ = n.get("type").string(("clamp", "ball", "fixed_vector", "revolute", "driven"))
     node = n.get("node").name_in(nodes, "node")
     member = n.get("member").name_in(members, "member") if n.has("member") else None
     vector = None
@@ -253,6 +275,12 @@ def _support(n: Node, nodes, members) -> Support:
     if member is not None and node not in (members[member].start, members[member].end):
         raise n.fail(f"node '{node}' is not an end of member '{member}'")
     axis = angle = direction = distance = None
+    if typ == "revolute":
+        if member is None:
+            raise n.fail("a revolute support needs 'member' (whose section vector lies on the axis)")
+        axis = _unit3(n.get("axis").vector(3, nonzero=True))
+    elif n.has("axis") and typ != "driven":
+        raise n.fail(f"'axis' applies to revolute supports only (type is '{typ}')", "axis")
     if typ == "driven":
         if not (n.has("rotation") or n.has("translation")):
             raise n.fail("a driven support needs 'rotation' and/or 'translation'")

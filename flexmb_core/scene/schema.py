@@ -84,13 +84,28 @@ class Member:
 @dataclass(frozen=True)
 class Support:
     node: str
-    type: str                        # clamp | ball | fixed_vector | driven
+    type: str                        # clamp | ball | fixed_vector | revolute | driven
     member: str | None = None
     vector: str | None = None        # v1 | v2 (fixed_vector)
     axis: tuple[float, float, float] | None = None        # driven: rotation axis (unit)
     angle: Signal | None = None                           # driven: rotation angle θ(t) (rad)
     direction: tuple[float, float, float] | None = None   # driven: translation direction (unit)
     distance: Signal | None = None                        # driven: translation s(t) (m)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A connection of members at a shared node, expressed by sharing DOFs (SPEC §5).
+
+    ``spherical``: positions only (what any shared node already is); ``revolute``: position and
+    the section vector along ``axis`` (each member must have one: set its ``up``); ``rigid``:
+    position and both vectors (collinear, equally oriented members).
+    """
+
+    type: str
+    node: str
+    members: tuple[str, ...]
+    axis: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -184,3 +199,4 @@ class Scene:
     solver: SolverSpec
     outputs: tuple[Output, ...] = field(default_factory=tuple)
     commands: CommandProgramSpec | None = None
+    joints: tuple[Joint, ...] = ()
