@@ -88,7 +88,7 @@ class DynamicIntegrator:
             self.lu.factor(m.mass_kdata)
             state.a[self._free] = self.lu.solve(rhs[self._free])
         state.atil[:] = state.a
-        kin, grav = energies(m, state)
+        kin, grav = energies(m, state, ws.mv)
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
 
     # -- one step ---------------------------------------------------------------------------
@@ -220,5 +220,5 @@ class DynamicIntegrator:
         self._tangent_age += 1
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
-        kin, grav = energies(m, state)
+        kin, grav = energies(m, state, ws.mv)
         return StepResult(True, it, rel, inc, 1, kin, strain, grav)

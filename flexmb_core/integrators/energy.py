@@ -19,9 +19,8 @@ def csr_matvec(indptr, indices, data, x, out):
         out[i] = s
 
 
-def energies(model: Model, state: State) -> tuple[float, float]:
-    """Kinetic energy ½ vᵀMv and gravity potential −f_g·(q − q0) (J)."""
-    mv = np.empty(model.ndof)
+def energies(model: Model, state: State, mv: np.ndarray) -> tuple[float, float]:
+    """Kinetic energy ½ vᵀMv and gravity potential −f_g·(q − q0) (J); ``mv (ndof,)`` scratch."""
     csr_matvec(*model.mass_csr, state.v, mv)
     kin = 0.5 * float(state.v @ mv)
     grav = -float(model.gravity_vector @ (state.q - model.q0))

@@ -92,5 +92,5 @@ class StaticSolver:
         strain = assemble(m, ws, q, lam, False)
         rf = (ws.r - ws.f_ext)[free]
         ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-        _, grav = energies(m, state)
+        _, grav = energies(m, state, ws.mv)
         return StepResult(True, it, float(np.linalg.norm(rf) / ref), inc, 1, 0.0, strain, grav)

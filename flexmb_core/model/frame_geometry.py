@@ -52,7 +52,6 @@ def frame_element_geometry(x_nodes: np.ndarray, v1_nodes: np.ndarray, v2_nodes: 
         dph = dphi[g]
         x_xi = dph @ x_nodes          # (3,) axis tangent (unnormalised)
         v1c = ph @ v1_nodes
-        v2c = ph @ v2_nodes
         t0 = x_xi / np.linalg.norm(x_xi)
         e1 = v1c - (v1c @ t0) * t0
         e1 /= np.linalg.norm(e1)

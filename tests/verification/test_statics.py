@@ -56,7 +56,6 @@ def test_rollup_thick_section_follows_svk():
     hist, m_max, ei, _ = rollup(length, h, 10)
     for t, tip in hist[4::5]:
         svk = svk_rollup_tip_relaxed_section(length, t * m_max, 1e7, h, h)
-        lin = linear_rollup_tip(length, t * m_max, ei)
         err = math.hypot(tip[0] - svk["x"], tip[1] - svk["y"]) / length
         assert err < 1e-5, f"M/Mmax = {t:.2f}: tip error vs SVK {err:.2e}·L"
     gap = math.hypot(*hist[-1][1][:2]) / length
