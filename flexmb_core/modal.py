@@ -8,6 +8,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from .errors import FlexmbError
 from .model.assembly import assemble, update_load_scales
 from .model.model import Model
 from .model.workspace import Workspace
@@ -33,6 +34,8 @@ def natural_modes(model: Model, q: np.ndarray | None = None, lam: np.ndarray | N
     Includes the load stiffness of configuration-dependent loads at time ``t``. Meant for
     verification and model inspection (n ≲ 3000 free DOFs), not for the time loop.
     """
+    if model.n_multipliers:
+        raise FlexmbError("modal analysis of models with rigid corners (multipliers) is not supported yet")
     ws = Workspace(model)
     q = model.q0 if q is None else q
     lam = np.ones(model.actuators.l0.size) if lam is None else lam

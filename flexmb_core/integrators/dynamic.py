@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from ..kernels.constraints import rigid_corner_group
 from ..model.assembly import apply_drives, assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
@@ -68,7 +69,8 @@ class DynamicIntegrator:
         self._q_hat = np.zeros(n)
         self._w = np.zeros(n)
         self._q_eval = np.zeros(n)
-        self._rf = np.zeros(model.nfree)
+        self._rf = np.zeros(model.nsys)
+        self._nf = model.nfree
         self._factored_coef: float | None = None   # tangent coefficient of the held factorization
         self._tangent_age = 0                       # steps since the last tangent refresh
         self.tangent_updates = 0
@@ -84,9 +86,20 @@ class DynamicIntegrator:
         state.a[:] = 0.0
         if self.spec.initial_acceleration == "consistent":
             csr_matvec(*m.mass_csr, state.v, self._ma)
-            rhs = ws.f_ext - ws.r - m.mass_damping * self._ma
-            self.lu.factor(m.mass_kdata)
-            state.a[self._free] = self.lu.solve(rhs[self._free])
+            rhs = np.zeros(m.nsys)
+            rhs[:self._nf] = (ws.f_ext - ws.r - m.mass_damping * self._ma)[self._free]
+            if m.n_multipliers:
+                # [M Gᵀ; G 0][a; λ] = [f − f_int; 0]: only the corner Jacobian G goes into kdata
+                # (at λ = 0 the corners add nothing to the forces already in ws.r).
+                ws.kdata[:] = 0.0
+                rigid_corner_group(state.q, ws.no_mult, m.corner_dofs, m.corner_alpha, m.corner_smap, True,
+                                   ws.r, ws.rc, ws.kdata, ws.corner_ke)
+                self.lu.factor(ws.kdata, mass=m.mass_kdata, coef=1.0)
+            else:
+                self.lu.factor(m.mass_kdata)
+            sol = self.lu.solve(rhs)
+            state.a[self._free] = sol[:self._nf]
+            state.mult[:] = sol[self._nf:]
         state.atil[:] = state.a
         kin, grav = energies(m, state, ws.mv)
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
@@ -149,6 +162,8 @@ class DynamicIntegrator:
         t_new = state.t + dt
         state.lam[:] = lam_new
         ch = spec.integrator == "chung_hulbert"
+        if ch and m.n_multipliers:
+            raise ValueError("the chung_hulbert integrator does not support rigid corners (multipliers)")
         update_load_scales(m, ws, t_new - af * dt if ch else t_new)
         q = state.q
         q[free] = q_hat[free] + (beta * dt * dt) * at_n[free]
@@ -177,10 +192,14 @@ class DynamicIntegrator:
             if ch:
                 np.multiply(q, 1.0 - af, out=q_eval)
                 q_eval += af * q_n
-            strain = assemble(m, ws, q_eval, state.lam, refresh)
+            strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult)
             nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am_r, af_r, gamma, dt, c_m,
                                         mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf)
             rel = nr / ref
+            viol = 0.0
+            if m.n_multipliers:
+                self._rf[self._nf:] = ws.rc
+                viol = float(np.abs(ws.rc).max())
             if not math.isfinite(nr):
                 message = f"non-finite residual at Newton iteration {it}"
                 break
@@ -198,10 +217,12 @@ class DynamicIntegrator:
                 self.tangent_updates += 1
             dq = self.lu.solve(self._rf)
             inc = apply_increment(q, free, dq, -1.0, self._inv_scale)
+            if m.n_multipliers:
+                state.mult -= dq[self._nf:]
             if not math.isfinite(inc):
                 message = f"non-finite increment at Newton iteration {it}"
                 break
-            if inc <= spec.tolerance:
+            if inc <= spec.tolerance and viol <= spec.tolerance:
                 converged = True
                 break
             # Modified Newton keeps the factorization while it contracts fast; otherwise refresh.

@@ -63,33 +63,39 @@ class StaticSolver:
         q = state.q
         apply_drives(m, q, t)
         inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
+        nf = m.nfree
+        rf = np.zeros(m.nsys)
         for it in range(1, spec.max_iterations + 1):
-            assemble(m, ws, q, lam, True)
-            rf = (ws.r - ws.f_ext)[free]
+            assemble(m, ws, q, lam, True, state.mult)
+            rf[:nf] = (ws.r - ws.f_ext)[free]
+            rf[nf:] = ws.rc
             if not np.all(np.isfinite(rf)):
                 message = f"non-finite residual at iteration {it}"
                 break
             try:
                 self.lu.factor(ws.kdata)
             except RuntimeError as exc:
-                message = f"singular tangent at iteration {it} ({exc}); a mechanism with a free motion needs a support"
+                message = (f"singular tangent at iteration {it} ({exc}); "
+                           "a mechanism with a free motion needs a support")
                 break
             dq = self.lu.solve(-rf)
             if not np.all(np.isfinite(dq)):
                 message = f"non-finite increment at iteration {it}"
                 break
-            q[free] += dq
-            inc = float(np.max(np.abs(dq) * self._inv_scale))
+            q[free] += dq[:nf]
+            state.mult += dq[nf:]
+            inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
             ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-            rel = float(np.linalg.norm(rf) / ref)
-            if inc <= spec.tolerance:
+            rel = float(np.linalg.norm(rf[:nf]) / ref)
+            viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
+            if inc <= spec.tolerance and viol <= spec.tolerance:
                 converged = True
                 break
         if not converged:
             if not message:
                 message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e})"
             return StepResult(False, it, rel, inc, 1, message=message)
-        strain = assemble(m, ws, q, lam, False)
+        strain = assemble(m, ws, q, lam, False, state.mult)
         rf = (ws.r - ws.f_ext)[free]
         ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
         _, grav = energies(m, state, ws.mv)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.constraints import rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_group_actuator_dudlam
 from ..kernels.moments import conservative_moments, follower_moments
 from ..kernels.truss import truss_group, truss_group_actuator_dudlam
@@ -48,9 +49,12 @@ def apply_drives(model: Model, q: np.ndarray, t: float) -> None:
         q[d.v_ids[j]] = v0 * c + np.cross(a, v0) * sn + a * (a @ v0) * (1.0 - c)
 
 
-def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool) -> float:
+def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool,
+             mult: np.ndarray | None = None) -> float:
     """Internal forces minus configuration-dependent loads into ``ws.r`` (full), and the tangent
-    of that into ``ws.kdata`` (free–free CSR) when ``want_k``. Returns the strain energy (J).
+    of that into ``ws.kdata`` (system CSR: free DOFs, then multipliers) when ``want_k``. With rigid
+    corners, ``mult`` adds the constraint forces Gᵀλ to ``ws.r`` and the violations go to ``ws.rc``.
+    Returns the strain energy (J).
 
     Moment loads use the scales last set by :func:`update_load_scales`.
     """
@@ -65,6 +69,9 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
         t = model.truss
         energy += truss_group(q, t.edofs, t.l0, t.ea, t.act, lam, t.smap, want_k, ws.r, ws.kdata,
                               *ws.truss_scratch)
+    if model.corner_dofs.shape[0]:
+        rigid_corner_group(q, ws.no_mult if mult is None else mult, model.corner_dofs, model.corner_alpha,
+                           model.corner_smap, want_k, ws.r, ws.rc, ws.kdata, ws.corner_ke)
     m = model.moments
     if m.follower_vdofs.shape[0]:
         follower_moments(q, m.follower_vdofs, m.follower_mbody, ws.follower_scale, m.follower_smap,

@@ -144,8 +144,9 @@ def compile_scene(scene: Scene) -> Model:
         if mem.kind == "actuator" and mem.arc_center is not None:
             raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
         member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
+    corners: list[tuple[str, str, str]] = []
     if scene.joints:
-        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup)
+        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup, corners)
         keep = np.unique(remap)
         q0 = [q0[i] for i in keep]
         scale_kind = [scale_kind[i] for i in keep]
@@ -283,8 +284,24 @@ def compile_scene(scene: Scene) -> Model:
         mass_cols.append(d)
         mass_vals.append(np.full(3, pm.mass))
 
-    # -- sparse pattern over free DOFs ----------------------------------------------------
+    # -- rigid corners (multipliers) ---------------------------------------------------------
     nfree = free.size
+    infos_by_name = {mi.name: mi for mi in member_infos}
+    corner_dofs, corner_alpha, corner_sys = [], [], []
+    for ci, (ma, mb, node) in enumerate(corners):
+        n = node_lookup[node]
+        ka = int(np.nonzero(infos_by_name[ma].nodes == n)[0][0])
+        kb = int(np.nonzero(infos_by_name[mb].nodes == n)[0][0])
+        _, _, v1a, v2a = member_geom[ma]
+        _, _, v1b, v2b = member_geom[mb]
+        w0 = np.array([v1a[ka], v2a[ka], np.cross(v1a[ka], v2a[ka])])
+        corner_alpha.append(np.array([w0 @ v1b[kb], w0 @ v2b[kb]]))
+        ids = np.concatenate((infos_by_name[mb].vdofs[kb], infos_by_name[ma].vdofs[ka]))
+        corner_dofs.append(ids)
+        corner_sys.append(np.concatenate((free_index[ids], nfree + 6 * ci + np.arange(6))))
+    nsys = nfree + 6 * len(corners)
+
+    # -- sparse pattern over the system (free DOFs, then multipliers) ----------------------
     pair_r, pair_c = [], []
     for b in frame_build.values():
         for ed in b["edofs"]:
@@ -297,21 +314,28 @@ def compile_scene(scene: Scene) -> Model:
     pair_c.extend(mass_cols)
     pr = free_index[np.concatenate(pair_r)]
     pc = free_index[np.concatenate(pair_c)]
+    for idx in corner_sys:
+        pr = np.concatenate((pr, np.repeat(idx, idx.size)))
+        pc = np.concatenate((pc, np.tile(idx, idx.size)))
     ok = (pr >= 0) & (pc >= 0)
-    keys = np.unique(pr[ok] * nfree + pc[ok])
-    rows = keys // nfree
-    indices = (keys % nfree).astype(np.int64)
-    indptr = np.zeros(nfree + 1, dtype=np.int64)
+    keys = np.unique(pr[ok] * nsys + pc[ok])
+    rows = keys // nsys
+    indices = (keys % nsys).astype(np.int64)
+    indptr = np.zeros(nsys + 1, dtype=np.int64)
     np.add.at(indptr, rows + 1, 1)
     indptr = np.cumsum(indptr).astype(np.int64)
 
-    def scatter_map(ed: np.ndarray) -> np.ndarray:
-        r = free_index[np.repeat(ed, ed.size)]
-        c = free_index[np.tile(ed, ed.size)]
+    def scatter_map_sys(idx: np.ndarray) -> np.ndarray:
+        """CSR position of every (row, col) pair of system indices ``idx`` (−1 outside)."""
+        r = np.repeat(idx, idx.size)
+        c = np.tile(idx, idx.size)
         out = np.full(r.size, -1, dtype=np.int64)
         ok_ = (r >= 0) & (c >= 0)
-        out[ok_] = np.searchsorted(keys, r[ok_] * nfree + c[ok_])
+        out[ok_] = np.searchsorted(keys, r[ok_] * nsys + c[ok_])
         return out
+
+    def scatter_map(ed: np.ndarray) -> np.ndarray:
+        return scatter_map_sys(free_index[ed])
 
     groups = []
     for (order, _, nsec), b in sorted(frame_build.items()):
@@ -341,7 +365,7 @@ def compile_scene(scene: Scene) -> Model:
     fr, fc = free_index[mr], free_index[mc]
     ok = (fr >= 0) & (fc >= 0)
     mass_kdata = np.zeros(keys.size)
-    np.add.at(mass_kdata, np.searchsorted(keys, fr[ok] * nfree + fc[ok]), mv[ok])
+    np.add.at(mass_kdata, np.searchsorted(keys, fr[ok] * nsys + fc[ok]), mv[ok])
     u_trans = np.zeros((ndof, 3))
     for n in range(len(node_names)):
         u_trans[node_ydofs[n], np.arange(3)] = 1.0
@@ -358,6 +382,10 @@ def compile_scene(scene: Scene) -> Model:
         gravity_signal = scene.gravity.signal
     moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map)
 
+    corner_arrays = (np.asarray(corner_dofs, dtype=np.int64).reshape(-1, 12),
+                     np.asarray(corner_alpha, dtype=float).reshape(-1, 2, 3),
+                     np.asarray([scatter_map_sys(idx) for idx in corner_sys], dtype=np.int64).reshape(-1, 324))
+    _freeze(*corner_arrays)
     drives = None
     if drive_rows:
         drives = Drives(np.array([r[0] for r in drive_rows], dtype=np.int64), np.array([r[1] for r in drive_rows]),
@@ -380,7 +408,8 @@ def compile_scene(scene: Scene) -> Model:
     return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
                  tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
-                 scene.mass_damping, total_mass, drives, program, program_index, node_lookup, member_lookup)
+                 scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
+                 node_lookup, member_lookup)
 
 
 def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:
@@ -393,8 +422,12 @@ def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndar
                             "set the member's 'up' to the axis so that V2 lies on it")
 
 
-def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup) -> np.ndarray:
-    """For every DOF, the DOF it is merged into by the scene's joints (union–find roots)."""
+def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup, corners: list) -> np.ndarray:
+    """For every DOF, the DOF it is merged into by the scene's joints (union–find roots).
+
+    Rigid joints between members with different section frames cannot be expressed by sharing;
+    they are appended to ``corners`` as (member a, member b, node) for Lagrange multipliers.
+    """
     parent = np.arange(ndof)
 
     def find(i: int) -> int:
@@ -426,10 +459,8 @@ def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_look
                 first = (name, ids, frame)
                 continue
             if j.type == "rigid" and not np.allclose(frame, first[2], atol=1e-9):
-                raise SceneError(where, f"members '{first[0]}' and '{name}' have different section frames at "
-                                        f"'{j.node}': sharing vectors is rigid only for collinear, equally "
-                                        "oriented members (a rigid corner needs Lagrange multipliers, not yet "
-                                        "supported); align them with 'up' or use separate joints")
+                corners.append((first[0], name, j.node))       # held by multipliers, not by sharing
+                continue
             for a, b in zip(first[1], ids):
                 parent[find(int(b))] = find(int(a))
     return np.array([find(i) for i in range(ndof)], dtype=np.int64)

@@ -142,12 +142,21 @@ class Model:
     drives: Drives | None = None        # prescribed motion, or None
     program: object | None = None       # command program (flexmb_core.commands), or None
     program_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    nsys: int = 0                       # size of the linear system: free DOFs, then multipliers
+    corner_dofs: np.ndarray = field(default_factory=lambda: np.zeros((0, 12), dtype=np.int64))
+    corner_alpha: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    corner_smap: np.ndarray = field(default_factory=lambda: np.zeros((0, 324), dtype=np.int64))
     node_lookup: dict[str, int] = field(default_factory=dict)
     member_lookup: dict[str, int] = field(default_factory=dict)
 
     @property
     def nfree(self) -> int:
         return self.free.size
+
+    @property
+    def n_multipliers(self) -> int:
+        """Lagrange multipliers (6 per rigid corner), numbered after the free DOFs."""
+        return self.nsys - self.nfree
 
     @property
     def nnz(self) -> int:
@@ -181,5 +190,6 @@ class Model:
                 "prescribed_dofs": self.ndof - self.nfree, "nodes": len(self.node_names),
                 "members": len(self.members), "elements": kinds, "actuators": list(self.actuators.names),
                 "tangent_nonzeros": self.nnz, "mass_kg": self.total_mass,
+                "rigid_corners": self.corner_dofs.shape[0],
                 "frame_groups": [f"order {g.order}, {g.n_elements} el., {g.w.shape[1]} points/el."
                                  for g in self.frame_groups]}

@@ -25,15 +25,17 @@ class State:
     a: np.ndarray
     atil: np.ndarray
     lam: np.ndarray
+    mult: np.ndarray        # (6·corners,) Lagrange multipliers of rigid corners (N·m)
 
     @classmethod
     def at_rest(cls, model: Model, t: float = 0.0) -> "State":
         n = model.ndof
         return cls(t, model.q0.copy(), np.zeros(n), np.zeros(n), np.zeros(n),
-                   np.ones(model.actuators.l0.size))
+                   np.ones(model.actuators.l0.size), np.zeros(model.n_multipliers))
 
     def copy(self) -> "State":
-        return State(self.t, self.q.copy(), self.v.copy(), self.a.copy(), self.atil.copy(), self.lam.copy())
+        return State(self.t, self.q.copy(), self.v.copy(), self.a.copy(), self.atil.copy(), self.lam.copy(),
+                     self.mult.copy())
 
     def assign(self, other: "State") -> None:
         """Copy ``other`` into this state's arrays (no allocation)."""
@@ -43,6 +45,7 @@ class State:
         self.a[:] = other.a
         self.atil[:] = other.atil
         self.lam[:] = other.lam
+        self.mult[:] = other.mult
 
 
 class Workspace:
@@ -60,3 +63,6 @@ class Workspace:
         self.cons_scale = np.ones(model.moments.cons_vdofs.shape[0])
         self.load_scale = np.ones(model.load_vectors.shape[0])
         self.dudlam = np.zeros(model.actuators.l0.size)
+        self.rc = np.zeros(model.n_multipliers)     # constraint violations of rigid corners
+        self.corner_ke = np.zeros((18, 18))
+        self.no_mult = np.zeros(model.n_multipliers)

@@ -20,7 +20,7 @@ class SparseLU:
     that without copying the pattern and solve with ``trans='T'``."""
 
     def __init__(self, model: Model):
-        self.n = model.nfree
+        self.n = model.nsys
         self.indptr = model.indptr
         self.indices = model.indices
         self._lu = None
@@ -43,7 +43,7 @@ class FixedPatternSolver:
     """
 
     def __init__(self, model: Model, *, min_pivot_ratio: float = 1e-10):
-        self.skyline = SkylineLU(model.nfree, model.indptr, model.indices)
+        self.skyline = SkylineLU(model.nsys, model.indptr, model.indices)
         self.superlu = SparseLU(model)
         self.min_pivot_ratio = min_pivot_ratio
         self.fallbacks = 0

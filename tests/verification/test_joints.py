@@ -103,12 +103,18 @@ def test_revolute_joint_is_free_about_its_axis_only():
         _tip(d2)
 
 
-def test_joint_errors_explain_what_sharing_cannot_do():
+def test_revolute_axis_must_lie_on_a_section_vector():
     d = two_links("revolute")
     d["joints"][0]["axis"] = [1, 1, 0]
     with pytest.raises(SceneError, match="no section vector along the axis"):
         build(d)
+
+
+def test_rigid_joint_uses_sharing_when_frames_agree_and_multipliers_otherwise():
+    model, _ = build(two_links("rigid"))
+    assert model.n_multipliers == 0                 # collinear, same frame: shared vectors
     d = two_links("rigid")
-    d["members"]["b"]["up"] = [1, 0, 0]
-    with pytest.raises(SceneError, match="rigid corner needs Lagrange multipliers"):
-        build(d)
+    d["members"]["b"]["up"] = [1, 0, 0]              # same axis, section turned 90°: a corner
+    model, _ = build(d)
+    assert model.n_multipliers == 6
+    assert np.allclose(_tip(d), _tip(two_links("rigid")), atol=1e-9)   # still one rigid beam
