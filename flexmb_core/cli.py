@@ -45,7 +45,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(json.dumps(summary, indent=2))
         return 0
     print(f"scene {summary['scene']}: OK")
-    for k in ("dofs", "free_dofs", "prescribed_dofs", "nodes", "members", "tangent_nonzeros"):
+    for k in ("dofs", "free_dofs", "prescribed_dofs", "nodes", "members", "rigid_corners", "tangent_nonzeros"):
         print(f"  {k:18s} {summary[k]}")
     print(f"  {'mass':18s} {summary['mass_kg']:.6g} kg")
     print(f"  {'elements':18s} " + ", ".join(f"{k}: {v}" for k, v in summary["elements"].items()))
