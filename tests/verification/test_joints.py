@@ -118,3 +118,31 @@ def test_rigid_joint_uses_sharing_when_frames_agree_and_multipliers_otherwise():
     model, _ = build(d)
     assert model.n_multipliers == 6
     assert np.allclose(_tip(d), _tip(two_links("rigid")), atol=1e-9)   # still one rigid beam
+
+
+def test_statics_with_a_free_spin_link_needs_no_user_trick():
+    """A frame member with ball joints at both ends spins freely about its axis (zero stiffness).
+    The static solve converges anyway — the load has no component on the spin — to the
+    simply supported beam: midspan sag 5qL⁴/(384EI); the section does not wander."""
+    d = {
+        "name": "ball_ball",
+        "materials": {"steel": {"E": 2.1e11, "nu": 0.3, "rho": 7850.0}},
+        "sections": {"rod": {"shape": "circle", "radius": 0.01}},
+        "nodes": {"a": [0.0, 0.0, 0.0], "b": [1.0, 0.0, 0.0]},
+        "members": {"link": {"kind": "frame", "from": "a", "to": "b", "elements": 4, "material": "steel",
+                             "section": "rod"}},
+        "supports": [{"node": "a", "type": "ball"}, {"node": "b", "type": "ball"}],
+        "loads": {"gravity": [0.0, 0.0, -9.81]},
+        "solver": {"analysis": "static", "until": 1.0, "dt": 0.5, "max_substep_levels": 0},
+        "outputs": {"shape": {"kind": "member_shape", "member": "link"},
+                    "frame": {"kind": "section_vectors", "node": "a", "member": "link"}},
+    }
+    _, sim = build(d)
+    sim.initialize()
+    sim.run(1.0)
+    q_line = 7850.0 * math.pi * 0.01**2 * 9.81
+    ei = 2.1e11 * math.pi * 0.01**4 / 4
+    mid = sim.outputs()["shape"][6]
+    assert mid[2] == pytest.approx(-5 * q_line / (384 * ei), rel=1e-3)
+    v1, v2 = map(np.array, sim.outputs()["frame"])
+    assert abs(v1[2]) < 1e-2 and abs(v2[1]) < 1e-2       # the end section has not spun away
