@@ -66,6 +66,52 @@ def platform_pose(model: Model, q: np.ndarray, nodes: tuple[str, ...]) -> tuple[
     return p.mean(axis=0), quaternion_wxyz(rot)
 
 
+def actuator_velocities(model: Model, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rate of change of every actuator's end-to-end length (m/s), shape (na,)."""
+    e = model.actuators.end_ydofs
+    d = q[e[:, 3:]] - q[e[:, :3]]
+    dv = v[e[:, 3:]] - v[e[:, :3]]
+    return np.einsum("ij,ij->i", d, dv) / np.linalg.norm(d, axis=1)
+
+
+def _section_frame(model: Model, q: np.ndarray, member: str, node: str) -> tuple[np.ndarray, np.ndarray]:
+    info = model.member(member)
+    k = int(np.nonzero(info.nodes == model.node(node))[0][0])
+    v = q[info.vdofs[k]]
+    return v[:3], v[3:]
+
+
+def joint_angle(model: Model, q: np.ndarray, node: str, members: tuple[str, ...]) -> float:
+    """Rotation (rad) about a hinge at ``node``: of member b relative to member a, or of a single
+    member relative to its reference orientation. The hinge axis is the section vector the members
+    share (the one whose direction the joint keeps); the angle is that of the other vector."""
+    a1, a2 = _section_frame(model, q, members[0], node)
+    r1, r2 = _section_frame(model, model.q0, members[0], node)
+    if len(members) == 2:
+        b1, b2 = _section_frame(model, q, members[1], node)
+        s1, s2 = _section_frame(model, model.q0, members[1], node)
+        # axis: the vector of a that b shares (identical ids after the joint merge)
+        shared_v2 = np.allclose(a2, b2) and not np.allclose(a1, b1)
+        axis = a2 if shared_v2 else a1
+        u_a, u_b = (a1, b1) if shared_v2 else (a2, b2)
+        u_a0, u_b0 = (r1, s1) if shared_v2 else (r2, s2)
+        axis0 = r2 if shared_v2 else r1
+        cur = _signed_angle(u_a, u_b, axis)
+        ref = _signed_angle(u_a0, u_b0, axis0)
+        return float(cur - ref)
+    # single member: the axis is the vector that kept its direction (fixed by a revolute support)
+    use_v2 = np.allclose(a2 / np.linalg.norm(a2), r2 / np.linalg.norm(r2), atol=1e-6)
+    axis = a2 if use_v2 else a1
+    return float(_signed_angle(r1 if use_v2 else r2, a1 if use_v2 else a2, axis))
+
+
+def _signed_angle(u: np.ndarray, w: np.ndarray, axis: np.ndarray) -> float:
+    n = axis / np.linalg.norm(axis)
+    u = u - (u @ n) * n
+    w = w - (w @ n) * n
+    return float(np.arctan2(np.cross(u, w) @ n, u @ w))
+
+
 def evaluate_output(model: Model, ws: Workspace, state: State, out: Output, energy: dict | None = None):
     """Value of one declared output (float, list or dict; JSON-ready)."""
     q = state.q
@@ -82,12 +128,16 @@ def evaluate_output(model: Model, ws: Workspace, state: State, out: Output, ener
         return q[info.ydofs].tolist()
     if out.kind == "energy":
         return dict(energy or {})
+    if out.kind == "joint_angle":
+        return joint_angle(model, q, out.node, out.nodes)
     if out.kind == "platform_pose":
         pos, quat = platform_pose(model, q, out.nodes)
         return {"position": pos.tolist(), "orientation_wxyz": quat.tolist()}
     i = model.actuators.names.index(out.actuator)
     if out.kind == "actuator_length":
         return float(actuator_lengths(model, q)[i])
+    if out.kind == "actuator_velocity":
+        return float(actuator_velocities(model, q, state.v)[i])
     if out.kind == "actuator_command":
         return float(state.lam[i] * model.actuators.l0[i])
     return float(actuator_forces(model, ws, state)[i])

@@ -27,6 +27,8 @@ OUTPUT_KINDS = {
     "energy": (),
     "member_shape": ("member",),
     "platform_pose": ("nodes",),
+    "actuator_velocity": ("actuator",),
+    "joint_angle": ("node", "members"),
 }
 
 
@@ -365,7 +367,7 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
 
 
 def _output(name: str, n: Node, nodes, members) -> Output:
-    kind = n.mapping({"kind", "node", "member", "actuator", "nodes"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
+    kind = n.mapping({"kind", "node", "member", "actuator", "nodes", "members"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
     need = OUTPUT_KINDS[kind]
     extra = sorted(k for k in n.value if k != "kind" and k not in need)
     if extra:
@@ -373,6 +375,17 @@ def _output(name: str, n: Node, nodes, members) -> Output:
     node = n.get("node").name_in(nodes, "node") if "node" in need else None
     member = n.get("member").name_in(members, "member") if "member" in need else None
     pose_nodes: tuple[str, ...] = ()
+    if "members" in need:
+        lst = [m.name_in(members, "member") for m in n.get("members").list()]
+        if not 1 <= len(lst) <= 2:
+            raise n.fail(f"a joint angle relates 1 member (to its reference) or 2 members, got {lst}", "members")
+        for m in lst:
+            mem = members[m]
+            if mem.kind == "truss" or (mem.actuator and mem.actuator.variant == "bar"):
+                raise n.fail(f"member '{m}' has no section vectors", "members")
+            if node not in (mem.start, mem.end) and node not in mem.via:
+                raise n.fail(f"member '{m}' does not pass through node '{node}'", "members")
+        pose_nodes = tuple(lst)
     if "nodes" in need:
         lst = n.get("nodes").list()
         if len(lst) != 3:

@@ -88,6 +88,23 @@ def test_deployable_boom_reaches_the_kinematic_configuration():
     expected = k + np.array([np.cos(beta), np.sin(beta)])
     assert np.abs(tip[:2] - expected).max() < 1e-8
     assert abs(tip[2]) < 1e-12
+    # passive joint angles: the shoulder turned by α, the elbow opened from its 150° fold
+    out = sim.outputs()
+    assert out["shoulder"] == pytest.approx(alpha, abs=1e-7)
+    assert out["elbow"] == pytest.approx((beta - alpha) - np.radians(150.0), abs=1e-7)
+
+
+def test_actuator_velocity_is_the_rate_of_the_length():
+    model = compile_scene(load_scene(SCENES / "deployable_boom.yaml", {"until": 1.0}))
+    sim = Simulator(model)
+    sim.initialize()
+    hist = []
+    sim.run(1.0, callback=lambda s, r: hist.append((s.state.t, s.outputs()["act2_velocity"],
+                                                   float(np.linalg.norm(np.diff(
+                                                       s.state.q[model.actuators.end_ydofs[1]].reshape(2, 3), axis=0))))))
+    t, vel, length = map(np.array, zip(*hist))
+    fd = np.gradient(length, t)
+    assert np.abs(vel[5:-5] - fd[5:-5]).max() < 1e-3 * np.abs(vel).max()
 
 
 def test_tendon_arm_bends_into_the_chord_geometry_arc():
