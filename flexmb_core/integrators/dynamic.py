@@ -23,8 +23,7 @@ import math
 
 import numpy as np
 
-from ..kernels.constraints import rigid_corner_group
-from ..model.assembly import apply_drives, assemble, update_load_scales
+from ..model.assembly import apply_drives, assemble, assemble_constraints, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
@@ -92,8 +91,7 @@ class DynamicIntegrator:
                 # [M Gᵀ; G 0][a; λ] = [f − f_int; 0]: only the corner Jacobian G goes into kdata
                 # (at λ = 0 the corners add nothing to the forces already in ws.r).
                 ws.kdata[:] = 0.0
-                rigid_corner_group(state.q, ws.no_mult, m.corner_dofs, m.corner_alpha, m.corner_smap, True,
-                                   ws.r, ws.rc, ws.kdata, ws.corner_ke)
+                assemble_constraints(m, ws, state.q, ws.no_mult, True)
                 self.lu.factor(ws.kdata, mass=m.mass_kdata, coef=1.0)
             else:
                 self.lu.factor(m.mass_kdata)

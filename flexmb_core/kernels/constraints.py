@@ -87,3 +87,106 @@ def _levi(i, j, m):
     if (i, j, m) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         return 1.0
     return -1.0
+
+
+@njit(cache=True)
+def _skew_mul(a, b):
+    """a × b for 3-tuples/arrays."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True)
+def _frame_fibre(c, v1, v2, w3):
+    """Σ_j c_j W_j with W = (V1, V2, V1 × V2)."""
+    return (c[0] * v1[0] + c[1] * v2[0] + c[2] * w3[0], c[0] * v1[1] + c[1] * v2[1] + c[2] * w3[1],
+            c[0] * v1[2] + c[1] * v2[2] + c[2] * w3[2])
+
+
+@njit(cache=True)
+def _dfibre(c, v1, v2, which, i, j):
+    """∂(Σ c W)_i / ∂V_which_j: c1 δ − c3 [V2]× (which = 0) or c2 δ + c3 [V1]× (which = 1)."""
+    d = 1.0 if i == j else 0.0
+    if which == 0:
+        return c[0] * d - c[2] * _skew(v2, i, j)
+    return c[1] * d + c[2] * _skew(v1, i, j)
+
+
+@njit(cache=True)
+def _skew(a, i, j):
+    """[a]×_ij (so that [a]× b = a × b)."""
+    if i == j:
+        return 0.0
+    if i == 0:
+        return -a[2] if j == 1 else a[1]
+    if i == 1:
+        return a[2] if j == 0 else -a[0]
+    return -a[1] if j == 0 else a[0]
+
+
+@njit(cache=True)
+def hinge_group(q, mult, offset, dofs, alpha, beta, smap, want_k, r, rc, kdata, ke):
+    """Revolute joints whose axis lies in no section plane, by multipliers (SPEC §5.2):
+    c_k = a·b_k = 0 (k = 1, 2) with a = Σ α_j W_j^A the axis fibre of body A and b_k = Σ β_kj W_j^B
+    two fibres of body B orthogonal to the axis in the reference configuration.
+
+    ``dofs (nh, 12)`` = [V1A, V2A, V1B, V2B]; ``alpha (nh, 3)``; ``beta (nh, 2, 3)``; multipliers at
+    ``mult[offset + 2h + k]``; violations into ``rc`` at the same place; local unknowns
+    [V1A, V2A, V1B, V2B, λ1, λ2] (14), ``smap (nh, 196)``, ``ke`` (14, 14) scratch.
+    """
+    for h in range(dofs.shape[0]):
+        va1 = (q[dofs[h, 0]], q[dofs[h, 1]], q[dofs[h, 2]])
+        va2 = (q[dofs[h, 3]], q[dofs[h, 4]], q[dofs[h, 5]])
+        vb1 = (q[dofs[h, 6]], q[dofs[h, 7]], q[dofs[h, 8]])
+        vb2 = (q[dofs[h, 9]], q[dofs[h, 10]], q[dofs[h, 11]])
+        wa3 = _skew_mul(va1, va2)
+        wb3 = _skew_mul(vb1, vb2)
+        al = alpha[h]
+        f = _frame_fibre(al, va1, va2, wa3)
+        if want_k:
+            ke[:, :] = 0.0
+        for k in range(2):
+            be = beta[h, k]
+            g = _frame_fibre(be, vb1, vb2, wb3)
+            lam = mult[offset + 2 * h + k]
+            rc[offset + 2 * h + k] = f[0] * g[0] + f[1] * g[1] + f[2] * g[2]
+            row = 12 + k
+            # gradient: ∂c/∂V_A = (∂f/∂V_A)ᵀ g, ∂c/∂V_B = (∂g/∂V_B)ᵀ f
+            for blk in range(4):
+                for j in range(3):
+                    s = 0.0
+                    for i in range(3):
+                        if blk < 2:
+                            s += _dfibre(al, va1, va2, blk, i, j) * g[i]
+                        else:
+                            s += _dfibre(be, vb1, vb2, blk - 2, i, j) * f[i]
+                    r[dofs[h, 3 * blk + j]] += lam * s
+                    if want_k:
+                        ke[row, 3 * blk + j] += s
+                        ke[3 * blk + j, row] += s
+            if want_k:
+                # λ ∂²c: A–A and B–B from the cross products, A–B from the product of the two fibres
+                for i in range(3):
+                    for j in range(3):
+                        haa = -al[2] * lam * _skew(g, i, j)           # (V1A_i, V2A_j)
+                        ke[i, 3 + j] += haa
+                        ke[3 + j, i] += haa
+                        hbb = -be[2] * lam * _skew(f, i, j)           # (V1B_i, V2B_j)
+                        ke[6 + i, 9 + j] += hbb
+                        ke[9 + j, 6 + i] += hbb
+                for ba in range(2):
+                    for bb in range(2):
+                        for i in range(3):
+                            for j in range(3):
+                                s = 0.0
+                                for m in range(3):
+                                    s += _dfibre(al, va1, va2, ba, m, i) * _dfibre(be, vb1, vb2, bb, m, j)
+                                ke[3 * ba + i, 6 + 3 * bb + j] += lam * s
+                                ke[6 + 3 * bb + j, 3 * ba + i] += lam * s
+        if want_k:
+            n = 0
+            for i in range(14):
+                for j in range(14):
+                    s = smap[h, n]
+                    if s >= 0:
+                        kdata[s] += ke[i, j]
+                    n += 1

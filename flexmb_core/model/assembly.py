@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.constraints import rigid_corner_group
+from ..kernels.constraints import hinge_group, rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_group_actuator_dudlam
 from ..kernels.moments import conservative_moments, follower_moments
 from ..kernels.truss import truss_group, truss_group_actuator_dudlam
@@ -49,6 +49,17 @@ def apply_drives(model: Model, q: np.ndarray, t: float) -> None:
         q[d.v_ids[j]] = v0 * c + np.cross(a, v0) * sn + a * (a @ v0) * (1.0 - c)
 
 
+def assemble_constraints(model: Model, ws: Workspace, q: np.ndarray, mult: np.ndarray, want_k: bool) -> None:
+    """Multiplier constraints (rigid corners, off-plane hinges): Gᵀλ into ``ws.r``, violations into
+    ``ws.rc``, and their tangent blocks into ``ws.kdata`` when ``want_k``."""
+    if model.corner_dofs.shape[0]:
+        rigid_corner_group(q, mult, model.corner_dofs, model.corner_alpha, model.corner_smap, want_k,
+                           ws.r, ws.rc, ws.kdata, ws.corner_ke)
+    if model.hinge_dofs.shape[0]:
+        hinge_group(q, mult, 6 * model.corner_dofs.shape[0], model.hinge_dofs, model.hinge_alpha,
+                    model.hinge_beta, model.hinge_smap, want_k, ws.r, ws.rc, ws.kdata, ws.hinge_ke)
+
+
 def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool,
              mult: np.ndarray | None = None) -> float:
     """Internal forces minus configuration-dependent loads into ``ws.r`` (full), and the tangent
@@ -69,9 +80,7 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
         t = model.truss
         energy += truss_group(q, t.edofs, t.l0, t.ea, t.act, lam, t.smap, want_k, ws.r, ws.kdata,
                               *ws.truss_scratch)
-    if model.corner_dofs.shape[0]:
-        rigid_corner_group(q, ws.no_mult if mult is None else mult, model.corner_dofs, model.corner_alpha,
-                           model.corner_smap, want_k, ws.r, ws.rc, ws.kdata, ws.corner_ke)
+    assemble_constraints(model, ws, q, ws.no_mult if mult is None else mult, want_k)
     m = model.moments
     if m.follower_vdofs.shape[0]:
         follower_moments(q, m.follower_vdofs, m.follower_mbody, ws.follower_scale, m.follower_smap,

@@ -145,8 +145,9 @@ def compile_scene(scene: Scene) -> Model:
             raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
         member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
     corners: list[tuple[str, str, str]] = []
+    hinges: list[tuple[str, str, str, tuple]] = []
     if scene.joints:
-        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup, corners)
+        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup, corners, hinges)
         keep = np.unique(remap)
         q0 = [q0[i] for i in keep]
         scale_kind = [scale_kind[i] for i in keep]
@@ -299,7 +300,26 @@ def compile_scene(scene: Scene) -> Model:
         ids = np.concatenate((infos_by_name[mb].vdofs[kb], infos_by_name[ma].vdofs[ka]))
         corner_dofs.append(ids)
         corner_sys.append(np.concatenate((free_index[ids], nfree + 6 * ci + np.arange(6))))
-    nsys = nfree + 6 * len(corners)
+    hinge_dofs, hinge_alpha, hinge_beta, hinge_sys = [], [], [], []
+    base = nfree + 6 * len(corners)
+    for hi, (ma, mb, node, axis) in enumerate(hinges):
+        n = node_lookup[node]
+        ka = int(np.nonzero(infos_by_name[ma].nodes == n)[0][0])
+        kb = int(np.nonzero(infos_by_name[mb].nodes == n)[0][0])
+        _, _, v1a, v2a = member_geom[ma]
+        _, _, v1b, v2b = member_geom[mb]
+        axis = _unit(axis)
+        wa = np.array([v1a[ka], v2a[ka], np.cross(v1a[ka], v2a[ka])])
+        wb = np.array([v1b[kb], v2b[kb], np.cross(v1b[kb], v2b[kb])])
+        seed = np.eye(3)[int(np.argmin(np.abs(axis)))]
+        b1 = _unit(seed - (seed @ axis) * axis)
+        b2 = np.cross(axis, b1)
+        hinge_alpha.append(wa @ axis)
+        hinge_beta.append(np.array([wb @ b1, wb @ b2]))
+        ids = np.concatenate((infos_by_name[ma].vdofs[ka], infos_by_name[mb].vdofs[kb]))
+        hinge_dofs.append(ids)
+        hinge_sys.append(np.concatenate((free_index[ids], base + 2 * hi + np.arange(2))))
+    nsys = base + 2 * len(hinges)
 
     # -- sparse pattern over the system (free DOFs, then multipliers) ----------------------
     pair_r, pair_c = [], []
@@ -314,7 +334,7 @@ def compile_scene(scene: Scene) -> Model:
     pair_c.extend(mass_cols)
     pr = free_index[np.concatenate(pair_r)]
     pc = free_index[np.concatenate(pair_c)]
-    for idx in corner_sys:
+    for idx in corner_sys + hinge_sys:
         pr = np.concatenate((pr, np.repeat(idx, idx.size)))
         pc = np.concatenate((pc, np.tile(idx, idx.size)))
     ok = (pr >= 0) & (pc >= 0)
@@ -385,7 +405,11 @@ def compile_scene(scene: Scene) -> Model:
     corner_arrays = (np.asarray(corner_dofs, dtype=np.int64).reshape(-1, 12),
                      np.asarray(corner_alpha, dtype=float).reshape(-1, 2, 3),
                      np.asarray([scatter_map_sys(idx) for idx in corner_sys], dtype=np.int64).reshape(-1, 324))
-    _freeze(*corner_arrays)
+    hinge_arrays = (np.asarray(hinge_dofs, dtype=np.int64).reshape(-1, 12),
+                    np.asarray(hinge_alpha, dtype=float).reshape(-1, 3),
+                    np.asarray(hinge_beta, dtype=float).reshape(-1, 2, 3),
+                    np.asarray([scatter_map_sys(idx) for idx in hinge_sys], dtype=np.int64).reshape(-1, 196))
+    _freeze(*corner_arrays, *hinge_arrays)
     drives = None
     if drive_rows:
         drives = Drives(np.array([r[0] for r in drive_rows], dtype=np.int64), np.array([r[1] for r in drive_rows]),
@@ -409,7 +433,7 @@ def compile_scene(scene: Scene) -> Model:
                  tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
                  scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
-                 node_lookup, member_lookup)
+                 *hinge_arrays, node_lookup, member_lookup)
 
 
 def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:
@@ -422,11 +446,13 @@ def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndar
                             "set the member's 'up' to the axis so that V2 lies on it")
 
 
-def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup, corners: list) -> np.ndarray:
+def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup, corners: list,
+                   hinges: list) -> np.ndarray:
     """For every DOF, the DOF it is merged into by the scene's joints (union–find roots).
 
     Rigid joints between members with different section frames cannot be expressed by sharing;
-    they are appended to ``corners`` as (member a, member b, node) for Lagrange multipliers.
+    they are appended to ``corners`` as (member a, member b, node) for Lagrange multipliers;
+    revolute joints whose axis is not a section vector of every member go to ``hinges``.
     """
     parent = np.arange(ndof)
 
@@ -443,6 +469,18 @@ def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_look
             continue                                   # shared nodes already share positions
         n = node_lookup[j.node]
         first = None
+        if j.type == "revolute":
+            axis = np.asarray(j.axis)
+            aligned = []
+            for name in j.members:
+                k = int(np.nonzero(infos[name].nodes == n)[0][0])
+                _, _, v1, v2 = member_geom[name]
+                aligned.append(abs(v1[k] @ axis) > 1.0 - 1e-9 or abs(v2[k] @ axis) > 1.0 - 1e-9)
+            if not all(aligned):
+                # the axis lies in no common section plane: hold the hinge by multipliers
+                for name in j.members[1:]:
+                    hinges.append((j.members[0], name, j.node, tuple(j.axis)))
+                continue
         for name in j.members:
             mi = infos[name]
             k = int(np.nonzero(mi.nodes == n)[0][0])
@@ -451,7 +489,6 @@ def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_look
                 ids = mi.vdofs[k]
                 frame = np.concatenate((v1[k], v2[k]))
             else:
-                axis = np.asarray(j.axis)
                 off = _axis_offset(where, name, j.node, v1[k], v2[k], axis)
                 ids = mi.vdofs[k, off:off + 3]
                 frame = axis

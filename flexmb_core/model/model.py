@@ -146,6 +146,10 @@ class Model:
     corner_dofs: np.ndarray = field(default_factory=lambda: np.zeros((0, 12), dtype=np.int64))
     corner_alpha: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
     corner_smap: np.ndarray = field(default_factory=lambda: np.zeros((0, 324), dtype=np.int64))
+    hinge_dofs: np.ndarray = field(default_factory=lambda: np.zeros((0, 12), dtype=np.int64))
+    hinge_alpha: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    hinge_beta: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    hinge_smap: np.ndarray = field(default_factory=lambda: np.zeros((0, 196), dtype=np.int64))
     node_lookup: dict[str, int] = field(default_factory=dict)
     member_lookup: dict[str, int] = field(default_factory=dict)
 
@@ -190,6 +194,6 @@ class Model:
                 "prescribed_dofs": self.ndof - self.nfree, "nodes": len(self.node_names),
                 "members": len(self.members), "elements": kinds, "actuators": list(self.actuators.names),
                 "tangent_nonzeros": self.nnz, "mass_kg": self.total_mass,
-                "rigid_corners": self.corner_dofs.shape[0],
+                "rigid_corners": self.corner_dofs.shape[0], "multiplier_hinges": self.hinge_dofs.shape[0],
                 "frame_groups": [f"order {g.order}, {g.n_elements} el., {g.w.shape[1]} points/el."
                                  for g in self.frame_groups]}

@@ -65,4 +65,5 @@ class Workspace:
         self.dudlam = np.zeros(model.actuators.l0.size)
         self.rc = np.zeros(model.n_multipliers)     # constraint violations of rigid corners
         self.corner_ke = np.zeros((18, 18))
+        self.hinge_ke = np.zeros((14, 14))
         self.no_mult = np.zeros(model.n_multipliers)
