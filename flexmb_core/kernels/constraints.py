@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from numba import njit
 
+from .scatter import scatter_matrix
+
 
 @njit(cache=True)
 def rigid_corner_group(q, mult, dofs, alpha, smap, want_k, r, rc, kdata, ke):
@@ -70,13 +72,7 @@ def rigid_corner_group(q, mult, dofs, alpha, smap, want_k, r, rc, kdata, ke):
                                 ke[6 + j, 9 + m] += h
                                 ke[9 + m, 6 + j] += h
         if want_k:
-            n = 0
-            for i in range(18):
-                for j in range(18):
-                    s = smap[c, n]
-                    if s >= 0:
-                        kdata[s] += ke[i, j]
-                    n += 1
+            scatter_matrix(smap[c], ke, kdata)
 
 
 @njit(cache=True)
@@ -183,10 +179,4 @@ def hinge_group(q, mult, offset, dofs, alpha, beta, smap, want_k, r, rc, kdata, 
                                 ke[3 * ba + i, 6 + 3 * bb + j] += lam * s
                                 ke[6 + 3 * bb + j, 3 * ba + i] += lam * s
         if want_k:
-            n = 0
-            for i in range(14):
-                for j in range(14):
-                    s = smap[h, n]
-                    if s >= 0:
-                        kdata[s] += ke[i, j]
-                    n += 1
+            scatter_matrix(smap[h], ke, kdata)

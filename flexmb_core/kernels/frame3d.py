@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .scatter import scatter_matrix
+
 # Columns of the per-element material table ``mat[e]``.
 MAT_E, MAT_ET, MAT_G, MAT_GT, MAT_KT, MAT_KS = 0, 1, 2, 3, 4, 5
 N_MAT = 6
@@ -241,13 +243,7 @@ def frame_group(q, edofs, dax, dsec, w, nsec, mat, act, lam_act, smap, want_k, w
         for i in range(nloc):
             r[edofs[e, i]] += re[i]
         if want_k:
-            k = 0
-            for i in range(nloc):
-                for j in range(nloc):
-                    s = smap[e, k]
-                    if s >= 0:
-                        kdata[s] += ke[i, j]
-                    k += 1
+            scatter_matrix(smap[e], ke, kdata)
     return energy
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from numba import njit
 
+from .scatter import scatter_matrix
+
 
 @njit(cache=True)
 def truss_element(xe, l0, ea, lam, want_k, re, ke):
@@ -70,13 +72,7 @@ def truss_group(q, edofs, l0, ea, act, lam_act, smap, want_k, r, kdata, qe, re, 
         for i in range(6):
             r[edofs[e, i]] += re[i]
         if want_k:
-            k = 0
-            for i in range(6):
-                for j in range(6):
-                    s = smap[e, k]
-                    if s >= 0:
-                        kdata[s] += ke[i, j]
-                    k += 1
+            scatter_matrix(smap[e], ke, kdata)
     return energy
 
 

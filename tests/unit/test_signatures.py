@@ -8,15 +8,17 @@ import numba
 import pytest
 
 import flexmb_core.integrators.energy as energy_mod
+import flexmb_core.kernels.constraints as constraints_mod
 import flexmb_core.kernels.frame3d as frame_mod
 import flexmb_core.kernels.moments as moments_mod
+import flexmb_core.kernels.scatter as scatter_mod
 import flexmb_core.kernels.truss as truss_mod
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-MODULES = (frame_mod, truss_mod, moments_mod, energy_mod)
+MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod)
 
 
 def _kernels():
@@ -27,7 +29,7 @@ def _kernels():
 
 
 def test_each_kernel_compiles_one_signature():
-    for scene in ("cantilever_b1.yaml", "actuator_arm.yaml"):
+    for scene in ("cantilever_b1.yaml", "actuator_arm.yaml", "tendon_arm.yaml", "deployable_boom.yaml"):
         model = compile_scene(load_scene(SCENES / scene, {"until": 0.02}))
         sim = Simulator(model)
         sim.warmup()
