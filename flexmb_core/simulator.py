@@ -93,9 +93,20 @@ class Simulator:
         return time.perf_counter() - t0
 
     def initialize(self) -> StepResult:
-        """Apply the commands at t = 0 and (dynamics) compute the initial acceleration."""
+        """Apply the commands at t = 0 and (dynamics) compute the initial acceleration.
+
+        With ``initial_state: static`` a dynamic run starts from the static equilibrium at t0
+        (gravity and loads carried, at rest) instead of the unloaded reference geometry, so the
+        twin does not begin by dropping its own weight.
+        """
         self.state.lam[:] = self.command_lengths(self.state.t) / self.model.actuators.l0
         if self._dynamic is not None:
+            if self.spec.initial_state == "static":
+                pre = StaticSolver(self.model, self.ws, self.spec).solve_at(self.state, self.state.t,
+                                                                             self.state.lam)
+                if not pre.converged:
+                    raise ConvergenceError(f"initial static equilibrium did not converge: {pre.message}", pre)
+                self.state.v[:] = 0.0
             self.last = self._dynamic.initialize(self.state)
         else:
             self.last = self._static.solve_at(self.state, self.state.t, self.state.lam)

@@ -356,6 +356,7 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
         tolerance=n.get("tolerance", d.tolerance).number(positive=True, hi=1e-2),
         max_iterations=n.get("max_iterations", d.max_iterations).integer(lo=1, hi=1000),
         initial_acceleration=n.get("initial_acceleration", d.initial_acceleration).string(("consistent", "zero")),
+        initial_state=n.get("initial_state", d.initial_state).string(("rest", "static")),
         on_unconverged=n.get("on_unconverged", d.on_unconverged).string(("substep", "stop", "accept_flagged")),
         max_substep_levels=n.get("max_substep_levels", d.max_substep_levels).integer(lo=0, hi=12),
         static_steps=n.get("static_steps", d.static_steps).integer(lo=1, hi=100000),

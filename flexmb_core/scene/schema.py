@@ -151,6 +151,7 @@ class SolverSpec:
     tolerance: float = 1e-9
     max_iterations: int = 25
     initial_acceleration: str = "consistent"   # consistent | zero
+    initial_state: str = "rest"                # rest (reference geometry) | static (equilibrium at t0)
     on_unconverged: str = "substep"            # substep | stop | accept_flagged
     max_substep_levels: int = 4
     static_steps: int = 10
