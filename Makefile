@@ -26,8 +26,8 @@ MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.ms
 DEMO_CMD ?= $(VENV)/bin/flexmb run scenes/stewart_platform.yaml --json build/demo.json
 PYTEST_ARGS ?=
 
-# Environment of every recipe. DDS discovery never leaves the machine (ROS_LOCALHOST_ONLY is
-# ignored by Kilted: never use it); one BLAS thread; a writable numba cache.
+# Environment of every recipe. DDS discovery never leaves the machine (the discovery range is the
+# only localhost switch this ROS 2 honours); one BLAS thread; a writable numba cache.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export OPENBLAS_NUM_THREADS := 1
 export NUMBA_CACHE_DIR := $(CURDIR)/.cache/numba

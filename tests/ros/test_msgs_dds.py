@@ -88,7 +88,6 @@ def dds_env(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
     domain = random.SystemRandom().randint(1, 200)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)  # ignored by Kilted; never rely on it
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
     monkeypatch.setenv("PYTHONUNBUFFERED", "1")
     return dict(os.environ)
