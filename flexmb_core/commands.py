@@ -9,8 +9,34 @@ from __future__ import annotations
 
 import numpy as np
 
+from numba import njit
+
 from .errors import SceneError
 from .scene.schema import CommandProgramSpec
+
+
+@njit(cache=True)
+def hermite_row(values, rate_right, rate_left, h, t, out):
+    """Cubic Hermite interpolation of a table on the uniform grid k·h (one row per grid point,
+    one-sided rates per interval), held constant outside; result into ``out``."""
+    n = values.shape[0]
+    if t <= 0.0:
+        out[:] = values[0]
+        return
+    if t >= (n - 1) * h:
+        out[:] = values[n - 1]
+        return
+    i = min(int(t / h), n - 2)
+    s = (t - i * h) / h
+    s2 = s * s
+    s3 = s2 * s
+    h00 = 2 * s3 - 3 * s2 + 1
+    h10 = (s3 - 2 * s2 + s) * h
+    h01 = -2 * s3 + 3 * s2
+    h11 = (s3 - s2) * h
+    for j in range(values.shape[1]):
+        out[j] = (h00 * values[i, j] + h10 * rate_right[i, j] + h01 * values[i + 1, j]
+                  + h11 * rate_left[i, j])
 
 
 class StewartAppendixProgram:
@@ -42,20 +68,16 @@ class StewartAppendixProgram:
         self._values, _ = law(self._grid)                          # (n+1, 6)
         _, self._rate_right = law(self._grid[:-1] + eps)           # rate at the start of interval i
         _, self._rate_left = law(self._grid[1:] - eps)             # rate at the end of interval i
+        self._rate_right = np.ascontiguousarray(self._rate_right)
+        self._rate_left = np.ascontiguousarray(self._rate_left)
+        self._values = np.ascontiguousarray(self._values)
         self._t = np.zeros(1)
 
-    def lengths(self, t: float) -> np.ndarray:
-        """Commanded lengths (m) of the six legs at ``t`` (s)."""
-        if t >= self.t_end:
-            return self._values[-1].copy()
-        if t <= 0.0:
-            return self._values[0].copy()
-        h = self.grid_step
-        i = min(int(t / h), self._grid.size - 2)
-        s = (t - self._grid[i]) / h
-        s2, s3 = s * s, s * s * s
-        return ((2 * s3 - 3 * s2 + 1) * self._values[i] + (s3 - 2 * s2 + s) * h * self._rate_right[i]
-                + (-2 * s3 + 3 * s2) * self._values[i + 1] + (s3 - s2) * h * self._rate_left[i])
+    def lengths(self, t: float, out: np.ndarray | None = None) -> np.ndarray:
+        """Commanded lengths (m) of the six legs at ``t`` (s), into ``out`` if given."""
+        out = np.empty(6) if out is None else out
+        hermite_row(self._values, self._rate_right, self._rate_left, self.grid_step, t, out)
+        return out
 
     def exact_lengths(self, t: float) -> np.ndarray:
         """The law evaluated directly (reference for the table)."""

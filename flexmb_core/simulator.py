@@ -47,6 +47,11 @@ class Simulator:
         self.ws = Workspace(model)
         self.state = State.at_rest(model)
         self._override: np.ndarray | None = None
+        act = model.actuators
+        driven = set(model.program_index.tolist())
+        self._signal_actuators = [(i, s) for i, s in enumerate(act.commands) if s is not None and i not in driven]
+        self._lengths = act.l0.copy()            # actuators with neither signal nor program hold L0
+        self._program_buf = np.zeros(model.program_index.size)
         self.stats = RunStats()
         self.last: StepResult | None = None
         if self.spec.analysis == "static":
@@ -59,13 +64,14 @@ class Simulator:
     # -- commands -------------------------------------------------------------------------
     def command_lengths(self, t: float) -> np.ndarray:
         """Commanded actuator lengths (m) at ``t``: the external override if set, else the scene."""
-        act = self.model.actuators
         if self._override is not None:
             return self._override.copy()
-        lengths = np.array([act.l0[i] if s is None else evaluate(s, t) for i, s in enumerate(act.commands)])
+        lengths = self._lengths
+        for i, s in self._signal_actuators:
+            lengths[i] = evaluate(s, t)
         if self.model.program is not None:
-            lengths[self.model.program_index] = self.model.program.lengths(t)
-        return lengths
+            lengths[self.model.program_index] = self.model.program.lengths(t, self._program_buf)
+        return lengths.copy()
 
     def set_commands(self, lengths: np.ndarray | None) -> None:
         """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals."""

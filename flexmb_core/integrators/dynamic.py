@@ -99,7 +99,7 @@ class DynamicIntegrator:
             state.a[self._free] = sol[:self._nf]
             state.mult[:] = sol[self._nf:]
         state.atil[:] = state.a
-        kin, grav = energies(m, state, ws.mv)
+        kin, grav = energies(m, state)
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
 
     # -- one step ---------------------------------------------------------------------------
@@ -239,5 +239,5 @@ class DynamicIntegrator:
         self._tangent_age += 1
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
-        kin, grav = energies(m, state, ws.mv)
+        kin, grav = energies(m, state)
         return StepResult(True, it, rel, inc, 1, kin, strain, grav)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from ..model.model import Model
@@ -19,9 +18,19 @@ def csr_matvec(indptr, indices, data, x, out):
         out[i] = s
 
 
-def energies(model: Model, state: State, mv: np.ndarray) -> tuple[float, float]:
-    """Kinetic energy ½ vᵀMv and gravity potential −f_g·(q − q0) (J); ``mv (ndof,)`` scratch."""
-    csr_matvec(*model.mass_csr, state.v, mv)
-    kin = 0.5 * float(state.v @ mv)
-    grav = -float(model.gravity_vector @ (state.q - model.q0))
-    return kin, grav
+@njit(cache=True)
+def _energies(indptr, indices, data, v, q, q0, fg):
+    kin = 0.0
+    grav = 0.0
+    for i in range(indptr.size - 1):
+        s = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            s += data[k] * v[indices[k]]
+        kin += v[i] * s
+        grav -= fg[i] * (q[i] - q0[i])
+    return 0.5 * kin, grav
+
+
+def energies(model: Model, state: State) -> tuple[float, float]:
+    """Kinetic energy ½ vᵀMv and gravity potential −f_g·(q − q0) (J)."""
+    return _energies(*model.mass_csr, state.v, state.q, model.q0, model.gravity_vector)

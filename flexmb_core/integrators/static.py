@@ -98,5 +98,5 @@ class StaticSolver:
         strain = assemble(m, ws, q, lam, False, state.mult)
         rf = (ws.r - ws.f_ext)[free]
         ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-        _, grav = energies(m, state, ws.mv)
+        _, grav = energies(m, state)
         return StepResult(True, it, float(np.linalg.norm(rf) / ref), inc, 1, 0.0, strain, grav)

@@ -55,7 +55,6 @@ class Workspace:
         n = model.ndof
         self.r = np.zeros(n)            # internal force (+ follower loads), full
         self.kdata = np.zeros(model.nnz)
-        self.mv = np.zeros(n)           # M·v for the kinetic energy
         self.f_ext = np.zeros(n)
         self.frame_scratch = [frame_scratch(g.w.shape[1], g.dax.shape[2]) for g in model.frame_groups]
         self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros((6, 6)))
