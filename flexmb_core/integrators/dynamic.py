@@ -29,6 +29,7 @@ from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
+from ..solvers.substep import retry_in_pieces
 from .energy import csr_matvec, energies
 from .fused import apply_increment, inertial_residual, update_rates
 
@@ -117,28 +118,8 @@ class DynamicIntegrator:
             if not res.converged and self.spec.on_unconverged == "stop":
                 state.assign(self._backup)
             return res
-        lam0 = self._backup.lam.copy()
-        iters = res.iterations
-        for level in range(1, self.spec.max_substep_levels + 1):
-            state.assign(self._backup)
-            nsub = 2 ** level
-            ok = True
-            for k in range(1, nsub + 1):
-                lam_k = lam0 + (lam_new - lam0) * (k / nsub)
-                sub = self._newton(state, dt / nsub, lam_k)
-                iters += sub.iterations
-                if not sub.converged:
-                    ok = False
-                    break
-            if ok:
-                sub.iterations = iters
-                sub.substeps = nsub
-                sub.message = f"split into {nsub} sub-steps after: {res.message}"
-                return sub
-        state.assign(self._backup)
-        res.iterations = iters
-        res.message = f"no convergence even with {2 ** self.spec.max_substep_levels} sub-steps: {res.message}"
-        return res
+        return retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, dt / n, lam_k), state,
+                               self._backup, lam_new, self.spec.max_substep_levels, "sub-steps")
 
     def _newton(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec

@@ -16,6 +16,7 @@ from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
+from ..solvers.substep import retry_in_pieces
 from .energy import energies
 
 
@@ -28,31 +29,23 @@ class StaticSolver:
         self.spec = spec
         self.lu = FixedPatternSolver(model)
         self._inv_scale = 1.0 / model.dof_scale[model.free]
+        self._backup: State | None = None
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
-        """Equilibrium at pseudo-time ``t`` starting from ``state.q``; bisects on failure."""
-        backup = state.copy()
+        """Equilibrium at pseudo-time ``t`` starting from ``state.q``. On failure, the policy
+        ``on_unconverged`` applies as in dynamics: ``substep`` bisects the load increment,
+        ``stop`` restores the state, ``accept_flagged`` keeps the flagged iterate."""
+        if self._backup is None:
+            self._backup = state.copy()
+        self._backup.assign(state)
         res = self._newton(state, t, lam)
-        if res.converged:
+        if res.converged or self.spec.on_unconverged != "substep":
+            if not res.converged and self.spec.on_unconverged == "stop":
+                state.assign(self._backup)
             return res
-        t0, lam0 = backup.t, backup.lam.copy()
-        for level in range(1, self.spec.max_substep_levels + 1):
-            state.assign(backup)
-            nsub = 2 ** level
-            iters = 0
-            for k in range(1, nsub + 1):
-                sub = self._newton(state, t0 + (t - t0) * k / nsub, lam0 + (lam - lam0) * k / nsub)
-                iters += sub.iterations
-                if not sub.converged:
-                    break
-            else:
-                sub.iterations = iters
-                sub.substeps = nsub
-                sub.message = f"split into {nsub} load increments after: {res.message}"
-                return sub
-        state.assign(backup)
-        res.message = f"no convergence even with {2 ** self.spec.max_substep_levels} increments: {res.message}"
-        return res
+        t0 = self._backup.t
+        return retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, t0 + (t - t0) * k / n, lam_k),
+                               state, self._backup, lam, self.spec.max_substep_levels, "load increments")
 
     def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec

@@ -94,3 +94,13 @@ def test_initial_static_equilibrium_starts_the_twin_at_rest():
     k_rest, _ = run("rest")
     assert k_rest > 1e-4 * u_static        # the swing from the unloaded geometry
     assert k_static < 1e-12 * u_static     # at rest in equilibrium
+
+
+def test_statics_follows_the_same_policy_as_dynamics():
+    """accept_flagged in statics: no bisection, the flagged iterate is returned and counted."""
+    _, sim = _one_shot_rollup("accept_flagged", 6)
+    sim.initialize()
+    res = sim.step()
+    assert not res.converged and res.substeps == 1
+    assert "no convergence in 12 iterations" in res.message
+    assert sim.summary()["unconverged_steps"] == 1
