@@ -92,15 +92,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     progress = _Progress(until, not args.quiet)
     tracker = PoseTracker(model)
 
+    # Adapters (MCAP recorder, rerun logger) attach here: hooks with start(sim), step(sim, res)
+    # and close(sim, summary). The core never imports them.
+    hooks = [h(args, scene, model) for h in getattr(args, "hook_factories", ())]
+    hooks = [h for h in hooks if h is not None]
+    for h in hooks:
+        h.start(sim)
+
     def on_step(s, res):
         tracker.update(s.state.t, s.state.q)
         progress(s, res)
+        for h in hooks:
+            h.step(s, res)
 
     error = ""
     try:
         sim.run(until, callback=on_step)
     except ConvergenceError as exc:
         error = str(exc)
+    except KeyboardInterrupt:
+        # SIGINT: stop stepping but close every hook (recordings keep all they got) and report
+        error = f"interrupted at t = {sim.state.t:.6g} s"
     finally:
         progress.close()
     summary = sim.summary()
@@ -110,6 +122,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                     "outputs": sim.outputs()})
     if tracker.active:
         summary["tracking"] = tracker.summary()
+    for h in hooks:
+        h.close(sim, summary)
     text = json.dumps(summary, indent=2, allow_nan=True)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -128,7 +142,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                   f"rms {tr['rms_position_error_m']:.3e} m, max orientation error {tr['max_orientation_error_rad']:.3e} rad")
     if error:
         print(f"flexmb run: {error}", file=sys.stderr)
-        return 2
+        return 130 if error.startswith("interrupted") else 2
     return 0
 
 
@@ -162,7 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--integrator", choices=("newmark", "generalized_alpha", "chung_hulbert"))
     r.add_argument("--json", metavar="OUT", help="write the run summary (JSON) here")
     r.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
-    r.set_defaults(func=cmd_run)
+    r.set_defaults(func=cmd_run, hook_factories=[])
 
     cm = sub.add_parser("commands", help="generate actuator command tables")
     cm.add_argument("mechanism", choices=("stewart",))
@@ -173,12 +187,24 @@ def build_parser() -> argparse.ArgumentParser:
                     help="exact appendix law (non-zero initial velocity) or C²-blended start")
     cm.add_argument("--blend-time", type=float, default=1.0, help="blend duration (s)")
     cm.set_defaults(func=cmd_commands)
+    # Where the application layer (ros2_node.cli) adds its verbs and its options to `run`.
+    p.verbs = sub
+    p.verb_parsers = {"check": c, "run": r, "commands": cm}
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def add_run_hook(run_parser: argparse.ArgumentParser, factory) -> None:
+    """Register ``factory(args, scene, model) -> hook | None`` with ``flexmb run``.
+
+    A hook has ``start(sim)``, ``step(sim, result)`` after every step and ``close(sim, summary)``
+    (also after a failed or interrupted run); it may add keys to the JSON ``summary``.
+    """
+    run_parser.get_default("hook_factories").append(factory)
+
+
+def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
     _env_defaults()
-    args = build_parser().parse_args(argv)
+    args = (parser or build_parser()).parse_args(argv)
     for name in ("until", "dt"):
         v = getattr(args, name, None)
         if v is not None and (not math.isfinite(v) or v <= 0):

@@ -6,6 +6,7 @@ The ROS node and the recorders publish exactly these; ``flexmb run`` writes thei
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .model.assembly import actuator_dudlam
 from .model.model import Model
@@ -51,6 +52,60 @@ def quaternion_wxyz(rot: np.ndarray) -> np.ndarray:
         q[1 + k] = (rot[k, i] + rot[i, k]) / s
     q /= np.linalg.norm(q)
     return q if q[0] >= 0 else -q
+
+
+@njit(cache=True)
+def _pose_kernel(q, ids, frame0, pos, quat):  # pragma: no cover - numba
+    """Centroid ``pos (3,)`` and quaternion ``quat (4,)`` (w ≥ 0) of the triangle ``q[ids]`` (3, 3),
+    relative to its reference frame ``frame0`` (3, 3) (columns ex, ey, ez)."""
+    p = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            p[i, k] = q[ids[i, k]]
+    for k in range(3):
+        pos[k] = (p[0, k] + p[1, k] + p[2, k]) / 3.0
+    ex = p[2] - p[1]
+    ex /= np.sqrt(ex @ ex)
+    ez = np.cross(p[1] - p[0], p[2] - p[0])
+    ez /= np.sqrt(ez @ ez)
+    ey = np.cross(ez, ex)
+    frame = np.empty((3, 3))
+    frame[:, 0], frame[:, 1], frame[:, 2] = ex, ey, ez
+    rot = frame @ frame0.T
+    tr = rot[0, 0] + rot[1, 1] + rot[2, 2]
+    if tr > 0.0:
+        w = 2.0 * np.sqrt(tr + 1.0)
+        quat[0] = 0.25 * w
+        quat[1] = (rot[2, 1] - rot[1, 2]) / w
+        quat[2] = (rot[0, 2] - rot[2, 0]) / w
+        quat[3] = (rot[1, 0] - rot[0, 1]) / w
+    else:
+        i = 0
+        if rot[1, 1] > rot[i, i]:
+            i = 1
+        if rot[2, 2] > rot[i, i]:
+            i = 2
+        j, k = (i + 1) % 3, (i + 2) % 3
+        w = 2.0 * np.sqrt(1.0 + rot[i, i] - rot[j, j] - rot[k, k])
+        quat[0] = (rot[k, j] - rot[j, k]) / w
+        quat[1 + i] = 0.25 * w
+        quat[1 + j] = (rot[j, i] + rot[i, j]) / w
+        quat[1 + k] = (rot[k, i] + rot[i, k]) / w
+    quat /= np.sqrt(quat @ quat)
+    if quat[0] < 0.0:
+        quat *= -1.0
+
+
+class PlatformObserver:
+    """:func:`platform_pose` with the node ids and the reference frame computed once (the node's
+    per-step path: a few µs instead of ~0.2 ms)."""
+
+    def __init__(self, model: Model, nodes: tuple[str, ...]):
+        self.ids = np.ascontiguousarray([model.node_ydofs[model.node(n)] for n in nodes], dtype=np.int64)
+        self.frame0 = np.ascontiguousarray(_triangle_frame(model.q0[self.ids]))
+
+    def __call__(self, q: np.ndarray, pos: np.ndarray, quat: np.ndarray) -> None:
+        _pose_kernel(q, self.ids, self.frame0, pos, quat)
 
 
 def platform_pose(model: Model, q: np.ndarray, nodes: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:

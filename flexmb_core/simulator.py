@@ -73,10 +73,16 @@ class Simulator:
             lengths[self.model.program_index] = self.model.program.lengths(t, self._program_buf)
         return lengths.copy()
 
-    def set_commands(self, lengths: np.ndarray | None) -> None:
-        """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals."""
+    def set_commands(self, lengths: np.ndarray | None, check: bool = True) -> None:
+        """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals.
+
+        ``check=False`` skips the validation, for callers that validated already (the twin node's
+        command schedule, at every step)."""
         if lengths is None:
             self._override = None
+            return
+        if not check and self._override is not None:
+            self._override[:] = lengths
             return
         lengths = np.asarray(lengths, dtype=float)
         act = self.model.actuators

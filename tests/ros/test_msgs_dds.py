@@ -190,16 +190,20 @@ def test_twin_status_round_trip():
         "sim_time": 123.456,
         "substeps": 4,
         "message": "step 17: residual 1e-3 > tol (Δt halved)",
+        "command_latency": 2.5e-4,
+        "rejected_commands": 2**33 + 1,
     }
-    _assert_all_fields_listed(TwinStatus, values)
+    _assert_all_fields_listed(TwinStatus, values | {"command_stamp": None})
     msg = TwinStatus(**values)
     _set_header(msg, 2**31 - 1, 999_999_999, "world")
+    msg.command_stamp.sec, msg.command_stamp.nanosec = 17, 1_000
 
     back = deserialize_message(serialize_message(msg), TwinStatus)
 
     assert back.header.stamp.sec == 2**31 - 1
     assert back.header.stamp.nanosec == 999_999_999
     assert back.header.frame_id == "world"
+    assert (back.command_stamp.sec, back.command_stamp.nanosec) == (17, 1_000)
     for name, value in values.items():
         got = getattr(back, name)
         assert got == value and type(got) is type(value), f"{name}: sent {value!r}, got {got!r}"

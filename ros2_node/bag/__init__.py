@@ -1,0 +1,1 @@
+"""Recording, reading and replaying rosbag2-compatible MCAP (no rclpy needed)."""

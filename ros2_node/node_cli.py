@@ -1,0 +1,181 @@
+"""Verbs of the ROS adapter: ``flexmb node``, ``flexmb play``, ``flexmb demo``.
+
+rclpy is imported inside the verbs only, so the rest of ``flexmb`` works without ROS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from . import topics as T
+
+# flag → parameter name (None: same name with '-' → '_')
+_NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
+               "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json")
+
+
+def _localhost_only() -> None:
+    # DDS discovery must never leave the machine; this ROS 2 ignores ROS_LOCALHOST_ONLY.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    _localhost_only()
+    from .node import run_node
+
+    values = {"scene": args.scene}
+    for flag in _NODE_FLAGS:
+        v = getattr(args, flag.replace("-", "_"))
+        if v is not None:
+            values[flag.replace("-", "_")] = v
+    if args.mcap:
+        values["record"] = args.mcap
+    summary = run_node(values, node_name=args.name, ros_args=args.ros_args)
+    if not args.quiet:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    _localhost_only()
+    from .player import CommandSource, run_player
+
+    if args.csv:
+        if not args.names:
+            print("flexmb play: --csv needs --names leg1,leg2,... (actuator order of the columns)", file=sys.stderr)
+            return 1
+        source = CommandSource.from_csv(args.csv, args.names.split(","))
+    else:
+        source = CommandSource.from_scene(args.scene)
+    summary = run_player(source, json_out=args.json, twin=args.twin, mode=args.mode, until=args.until, dt=args.dt,
+                         rate=args.rate, topic=args.topic, timeout=args.timeout)
+    if not args.quiet:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _fmt_ms(x) -> str:
+    return "n/a" if x is None else f"{1e3 * x:.3f} ms"
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The twin and the player as two processes on DDS; prints one summary."""
+    _localhost_only()
+    env = dict(os.environ)
+    env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    node_json, player_json = out / "node.json", out / "player.json"
+    for f in (node_json, player_json):
+        f.unlink(missing_ok=True)
+    exe = [sys.executable, "-m", "ros2_node.cli"]
+    node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--duration", str(args.until),
+                      "--summary-json", str(node_json), "--quiet", "--idle-timeout", "10"]
+    if args.publish_rate:
+        node_cmd += ["--publish-rate", str(args.publish_rate)]
+    if args.mcap:
+        node_cmd += ["--mcap", args.mcap]
+    if args.rrd:
+        node_cmd += ["--rrd", args.rrd]
+    play_cmd = exe + ["play", args.scene, "--mode", args.mode, "--until", str(args.until), "--json", str(player_json),
+                      "--quiet", "--timeout", "120"]
+    print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
+          f"{args.mode}, {args.until:g} s", flush=True)
+    node = subprocess.Popen(node_cmd, env=env)
+    try:
+        player = subprocess.run(play_cmd, env=env, timeout=args.until * 20 + 300)
+        node.wait(timeout=120)
+    except (subprocess.TimeoutExpired, KeyboardInterrupt):
+        node.send_signal(signal.SIGINT)
+        node.wait(timeout=30)
+        print("flexmb demo: interrupted or timed out", file=sys.stderr)
+        return 2
+    finally:
+        if node.poll() is None:
+            node.send_signal(signal.SIGINT)
+            node.wait(timeout=30)
+    if player.returncode != 0 or node.returncode != 0 or not node_json.exists() or not player_json.exists():
+        print(f"flexmb demo: node exit {node.returncode}, player exit {player.returncode}", file=sys.stderr)
+        return 2
+    n = json.loads(node_json.read_text())
+    p = json.loads(player_json.read_text())
+    summary = {"node": n, "player": p}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    lat = p["latency_s"]
+    sw = n["step_wall_time_s"]
+    print(f"\n== flexmb demo: {n['scene']} ({n['mode']}, Δt = {n['dt'] * 1e3:g} ms) ==")
+    print(f"  simulated {n['sim_time_s']:.3f} s in {n['wall_time_s']:.3f} s wall: RTF {n['rtf']:.3f} "
+          f"(solver alone {n['solver_rtf']:.2f}); JIT warm-up {n['jit_warmup_s']:.2f} s")
+    print(f"  steps {n['steps']}, deadline misses {n['deadline_misses']} "
+          f"({100.0 * n['deadline_misses'] / max(n['steps'], 1):.2f} %), overruns {n['overruns']}, "
+          f"failed steps {n['failed_steps']}, rejected commands {sum(n['commands_rejected'].values())}")
+    print(f"  step wall time p50 {_fmt_ms(sw['p50'])}, p99 {_fmt_ms(sw['p99'])}, max {_fmt_ms(sw['max'])}")
+    print(f"  command → state latency (player, over DDS, {lat['count']} commands): p50 {_fmt_ms(lat['p50'])}, "
+          f"p99 {_fmt_ms(lat['p99'])}, max {_fmt_ms(lat['max'])}")
+    if "tracking" in p:
+        tr = p["tracking"]
+        print(f"  platform tracking vs the commanded pose ({tr['samples']} poses): max {tr['max_position_error_m']:.3e} m, "
+              f"rms {tr['rms_position_error_m']:.3e} m, max orientation {tr['max_orientation_error_rad']:.3e} rad")
+    if args.mcap:
+        print(f"  recording: {args.mcap}")
+    print(f"  summary: {out / 'summary.json'}")
+    return 0
+
+
+def register(verbs, run_parser) -> None:
+    n = verbs.add_parser("node", help="run the twin as a ROS 2 node (rclpy, DDS on localhost)",
+                         description="The flexmb twin node. Parameters can also be set with "
+                                     "--ros-args -p name:=value (they win over the flags).")
+    n.add_argument("scene")
+    n.add_argument("--name", default=T.DEFAULT_NODE_NAME, help="node name (private topics live under it)")
+    n.add_argument("--mode", choices=("realtime", "lockstep"))
+    n.add_argument("--dt", type=float, help="time step (s); default: the scene's")
+    n.add_argument("--integrator", choices=("newmark", "generalized_alpha", "chung_hulbert"))
+    n.add_argument("--publish-rate", type=float, help="Hz (default 500)")
+    n.add_argument("--shape-rate", type=float, help="Hz of ~/shape (default 30; 0 disables)")
+    n.add_argument("--command-source", choices=("external", "scene"))
+    n.add_argument("--command-timeout", type=float, help="s (default 0.5)")
+    n.add_argument("--command-timeout-behaviour", choices=("hold", "ramp_to_rest"))
+    n.add_argument("--duration", type=float, help="stop after this much simulated time (s)")
+    n.add_argument("--idle-timeout", type=float, help="lockstep: stop after this many s without commands")
+    n.add_argument("--qos-depth", type=int)
+    n.add_argument("--mcap", "--record", dest="mcap", metavar="DIR", help="record to this rosbag2/MCAP directory")
+    n.add_argument("--rrd", metavar="OUT", help="log to this rerun .rrd file")
+    n.add_argument("--summary-json", metavar="OUT", help="write the run summary here on exit")
+    n.add_argument("--quiet", action="store_true", help="do not print the summary")
+    n.add_argument("--ros-args", nargs=argparse.REMAINDER, default=None, help="ROS arguments (e.g. -p dt:=0.002)")
+    n.set_defaults(func=cmd_node, record=None)
+
+    p = verbs.add_parser("play", help="stream actuator commands to a twin node (controller stand-in)")
+    p.add_argument("scene", nargs="?", help="scene whose command definition to play")
+    p.add_argument("--csv", help="command table: t, L1..Ln[, rates] (instead of the scene's commands)")
+    p.add_argument("--names", help="actuator names of the CSV columns, comma-separated")
+    p.add_argument("--twin", default=T.DEFAULT_NODE_NAME, help="node name of the twin")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    p.add_argument("--until", type=float, default=20.0, help="s of simulated time")
+    p.add_argument("--dt", type=float, default=1e-3, help="lockstep: s between commands")
+    p.add_argument("--rate", type=float, default=1000.0, help="realtime: commands per second")
+    p.add_argument("--topic", choices=("actuator_commands", "commands"), default="actuator_commands")
+    p.add_argument("--timeout", type=float, default=30.0, help="s to wait for the twin")
+    p.add_argument("--json", metavar="OUT", help="write the player summary here")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_play)
+
+    d = verbs.add_parser("demo", help="twin node + player as two processes on DDS, with a summary")
+    d.add_argument("scene", nargs="?", default="scenes/stewart_platform.yaml")
+    d.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
+    d.add_argument("--until", type=float, default=20.0)
+    d.add_argument("--publish-rate", type=float)
+    d.add_argument("--mcap", metavar="DIR", help="record the node's run here")
+    d.add_argument("--rrd", metavar="OUT")
+    d.add_argument("--out", default="build/demo", help="directory of the JSON summaries")
+    d.set_defaults(func=cmd_demo)

@@ -1,0 +1,126 @@
+"""The node's parameters: one table (name, default, range, description), validated in one place.
+
+``flexmb node`` flags and ``--ros-args -p name:=value`` both end up here; ``ros2 param describe``
+shows the descriptions (the node declares every entry with a ``ParameterDescriptor``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from flexmb_core.errors import FlexmbError
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    default: object
+    description: str
+    choices: tuple[str, ...] = ()
+    low: float | None = None          # inclusive
+    high: float | None = None         # inclusive
+    read_only: bool = True            # fixed once the node runs
+
+
+SPECS: tuple[ParamSpec, ...] = (
+    ParamSpec("scene", "", "scene YAML file of the mechanism (required)"),
+    ParamSpec("mode", "realtime", "realtime: step at Δt paced by the wall clock; lockstep: one step per "
+              "received command message (deterministic, for tests and replay)", choices=("realtime", "lockstep")),
+    ParamSpec("dt", 0.0, "time step Δt (s); 0 = the scene's solver.dt", low=0.0, high=1.0),
+    ParamSpec("integrator", "", "override solver.integrator: newmark | generalized_alpha | chung_hulbert "
+              "('' = the scene's)", choices=("", "newmark", "generalized_alpha", "chung_hulbert")),
+    ParamSpec("publish_rate", 500.0, "rate (Hz of simulated time) of /joint_states, actuator states, pose, "
+              "status, /clock", low=1.0, high=10000.0, read_only=False),
+    ParamSpec("shape_rate", 30.0, "rate (Hz) of ~/shape (member polylines); 0 disables", low=0.0,
+              high=1000.0, read_only=False),
+    ParamSpec("publish_on_command", True, "also publish joint states and status right after the first step "
+              "that uses a new command (low command→state latency at any publish_rate)", read_only=False),
+    ParamSpec("command_source", "external", "external: the command topics drive the actuators (held at their "
+              "start lengths until the first command); scene: the scene's own commands", choices=("external", "scene")),
+    ParamSpec("command_timeout", 0.5, "s without a command before the timeout behaviour starts (realtime)",
+              low=1e-6, high=1e9),
+    ParamSpec("command_timeout_behaviour", "hold", "hold: keep the last lengths; ramp_to_rest: ramp smoothly "
+              "back to the start lengths", choices=("hold", "ramp_to_rest")),
+    ParamSpec("ramp_time", 2.0, "duration of ramp_to_rest (s)", low=1e-6, high=1e6),
+    ParamSpec("stale_after", 1.0, "reject stamped commands older than the twin's time by more than this (s)",
+              low=1e-6, high=1e9),
+    ParamSpec("max_lead", 1.0, "reject stamped commands ahead of the twin's time by more than this (s)",
+              low=1e-6, high=1e9),
+    ParamSpec("qos_depth", 10, "history depth of every publisher and subscription", low=1, high=100000),
+    ParamSpec("publish_clock", True, "publish /clock with the simulated time (the node owns time)"),
+    ParamSpec("duration", 0.0, "stop after this much simulated time (s); 0 = run until shutdown", low=0.0,
+              high=1e9),
+    ParamSpec("idle_timeout", 0.0, "lockstep: stop after this many wall seconds without a command once "
+              "commands have started; 0 = never", low=0.0, high=1e9),
+    ParamSpec("max_lag", 0.1, "realtime: when the twin is this far behind the wall clock (s), re-anchor "
+              "the schedule (counted as an overrun) instead of rushing to catch up", low=1e-3, high=1e6),
+    ParamSpec("record", "", "record inputs and outputs to this rosbag2/MCAP directory ('' = none)"),
+    ParamSpec("rrd", "", "log the twin to this rerun .rrd file ('' = none)"),
+    ParamSpec("summary_json", "", "write the run summary (JSON) here on exit ('' = none)"),
+    ParamSpec("log_throttle", 1.0, "minimum interval between two identical warnings (s)", low=0.0, high=3600.0,
+              read_only=False),
+)
+BY_NAME = {s.name: s for s in SPECS}
+
+
+@dataclass
+class NodeParams:
+    scene: str = ""
+    mode: str = "realtime"
+    dt: float = 0.0
+    integrator: str = ""
+    publish_rate: float = 500.0
+    shape_rate: float = 30.0
+    publish_on_command: bool = True
+    command_source: str = "external"
+    command_timeout: float = 0.5
+    command_timeout_behaviour: str = "hold"
+    ramp_time: float = 2.0
+    stale_after: float = 1.0
+    max_lead: float = 1.0
+    qos_depth: int = 10
+    publish_clock: bool = True
+    duration: float = 0.0
+    idle_timeout: float = 0.0
+    max_lag: float = 0.1
+    record: str = ""
+    rrd: str = ""
+    summary_json: str = ""
+    log_throttle: float = 1.0
+
+    @classmethod
+    def from_values(cls, values: dict) -> "NodeParams":
+        """Validated parameters; :class:`FlexmbError` names the parameter, value and expectation."""
+        out = cls()
+        for f in fields(cls):
+            if f.name in values:
+                setattr(out, f.name, check(f.name, values[f.name]))
+        if not out.scene:
+            raise FlexmbError("parameter 'scene': required (a scene YAML file), got ''")
+        return out
+
+
+def check(name: str, value):
+    """``value`` converted to the parameter's type, or :class:`FlexmbError`."""
+    spec = BY_NAME.get(name)
+    if spec is None:
+        raise FlexmbError(f"unknown parameter '{name}'; known: {sorted(BY_NAME)}")
+    kind = type(spec.default)
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise FlexmbError(f"parameter '{name}': expected true or false, got {value!r}")
+    elif kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise FlexmbError(f"parameter '{name}': expected an integer, got {value!r}")
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise FlexmbError(f"parameter '{name}': expected a finite number, got {value!r}")
+        value = float(value)
+    elif not isinstance(value, str):
+        raise FlexmbError(f"parameter '{name}': expected a string, got {value!r}")
+    if spec.choices and value not in spec.choices:
+        raise FlexmbError(f"parameter '{name}': expected one of {list(spec.choices)}, got {value!r}")
+    if spec.low is not None and value < spec.low or spec.high is not None and value > spec.high:
+        raise FlexmbError(f"parameter '{name}': expected a value in [{spec.low}, {spec.high}], got {value!r}")
+    return value

@@ -1,0 +1,285 @@
+"""``flexmb play``: a controller stand-in that streams actuator commands to a twin node over DDS.
+
+Sources: the scene's own command definition (signals or a program such as the Stewart appendix
+law: ``flexmb play SCENE``) or a CSV table (``--csv``: ``t, L1..Ln[, rate1..raten]``, linear
+interpolation). Forms: ``flexmb_msgs/ActuatorCommand`` (default: named, stamped with the time the
+lengths are meant for, with rates) or ``std_msgs/Float64MultiArray`` (``--topic commands``).
+
+Pacing. ``lockstep``: send the command for ``t + Δt``, wait for the twin's status that answers it,
+repeat (deterministic). ``realtime``: send at ``--rate`` Hz on the wall clock, for the twin's time
+estimated from its ``/clock`` (the twin owns time). Either way the player measures the end-to-end
+command→state latency (its stamp echoed in ``TwinStatus.command_stamp``) and, when the command
+program knows the commanded pose, how closely ``~/platform_pose`` tracks it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from flexmb_core.errors import FlexmbError
+
+from . import messages as M
+from . import topics as T
+from .convert import message_class, to_ros
+
+
+class CommandSource:
+    """Commanded lengths (m) and rates (m/s) as functions of time."""
+
+    def __init__(self, names, fn, reference_pose=None):
+        self.names = list(names)
+        self._fn = fn
+        self.reference_pose = reference_pose
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        h = 1e-4
+        lengths = self._fn(t)
+        rates = (self._fn(t + h) - self._fn(max(t - h, 0.0))) / (t + h - max(t - h, 0.0))
+        return lengths, rates
+
+    @classmethod
+    def from_scene(cls, path: str) -> "CommandSource":
+        from flexmb_core.model.compile import compile_scene
+        from flexmb_core.scene import load_scene
+        from flexmb_core.simulator import Simulator
+
+        model = compile_scene(load_scene(path))
+        if not model.actuators.l0.size:
+            raise FlexmbError(f"{path}: the scene has no actuators to command")
+        sim = Simulator(model)
+        program = model.program
+        ref = program.reference_pose if hasattr(program, "reference_pose") else None
+        return cls(model.actuators.names, lambda t: sim.command_lengths(t), ref)
+
+    @classmethod
+    def from_csv(cls, path: str, names: list[str]) -> "CommandSource":
+        try:
+            data = np.loadtxt(path, delimiter=",", comments="#", ndmin=2, skiprows=_header_rows(path))
+        except (OSError, ValueError) as exc:
+            raise FlexmbError(f"{path}: cannot read the command table: {exc}") from None
+        n = len(names)
+        if data.shape[1] not in (1 + n, 1 + 2 * n):
+            raise FlexmbError(f"{path}: expected columns t, {n} lengths[, {n} rates], got {data.shape[1]} columns")
+        if not np.all(np.diff(data[:, 0]) > 0):
+            raise FlexmbError(f"{path}: the time column must increase strictly")
+        t, lengths = data[:, 0], data[:, 1:1 + n]
+        return cls(names, lambda tt: np.array([np.interp(tt, t, lengths[:, i]) for i in range(n)]))
+
+
+def _header_rows(path: str) -> int:
+    with open(path) as f:
+        first = f.readline()
+    try:
+        [float(x) for x in first.split(",")]
+        return 0
+    except ValueError:
+        return 1
+
+
+class Player:
+    """Streams one :class:`CommandSource` to the twin named ``twin`` and measures what comes back."""
+
+    def __init__(self, source: CommandSource, *, context, twin: str = T.DEFAULT_NODE_NAME, mode: str = "lockstep",
+                 until: float = 20.0, dt: float = 1e-3, rate: float = 1000.0, topic: str = "actuator_commands",
+                 qos_depth: int = 100, timeout: float = 30.0):
+        import rclpy
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        if mode not in ("lockstep", "realtime"):
+            raise FlexmbError(f"--mode: expected lockstep or realtime, got {mode!r}")
+        self.source, self.mode, self.until, self.dt, self.rate = source, mode, until, dt, rate
+        self.timeout = timeout
+        self.context = context
+        self.node = rclpy.create_node("flexmb_player", context=context)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=qos_depth, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+        self.topic = {"actuator_commands": T.ACTUATOR_COMMANDS, "commands": T.COMMANDS}.get(topic)
+        if self.topic is None:
+            raise FlexmbError(f"--topic: expected actuator_commands or commands, got {topic!r}")
+        self.pub = self.node.create_publisher(message_class(self.topic.type), self.topic.resolved(twin), qos)
+        self.node.create_subscription(message_class(T.STATUS.type), T.STATUS.resolved(twin), self._on_status, qos)
+        self.node.create_subscription(message_class(T.PLATFORM_POSE.type), T.PLATFORM_POSE.resolved(twin),
+                                      self._on_pose, qos)
+        self.node.create_subscription(message_class(T.CLOCK.type), T.CLOCK.resolved(twin), self._on_clock, qos)
+        try:
+            from rclpy.experimental import EventsExecutor
+            self.executor = EventsExecutor(context=context)
+        except Exception:          # pragma: no cover
+            from rclpy.executors import SingleThreadedExecutor
+            self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.sim_time = None                  # twin's newest reported time (s)
+        self.wall_at_sim_time = 0.0
+        self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent
+        self.latencies: list[float] = []
+        self.answered_ns = -1
+        self.pose_errors: list[float] = []
+        self.angle_errors: list[float] = []
+        self.statuses = 0
+        self.unconverged = 0
+        self.last_status = None
+
+    # -- callbacks ------------------------------------------------------------------------------
+    def _on_status(self, msg) -> None:
+        now = time.perf_counter()
+        self.statuses += 1
+        self.last_status = msg
+        if not msg.converged:
+            self.unconverged += 1
+        ns = msg.command_stamp.sec * 1_000_000_000 + msg.command_stamp.nanosec
+        sent = self.sent.pop(ns, None)
+        if sent is not None:
+            self.latencies.append(now - sent)
+        self.answered_ns = max(self.answered_ns, ns)
+        self._note_time(msg.sim_time, now)
+
+    def _on_clock(self, msg) -> None:
+        self._note_time(msg.clock.sec + 1e-9 * msg.clock.nanosec, time.perf_counter())
+
+    def _note_time(self, t: float, wall: float) -> None:
+        if self.sim_time is None or t > self.sim_time:
+            self.sim_time, self.wall_at_sim_time = t, wall
+
+    def _on_pose(self, msg) -> None:
+        ref = self.source.reference_pose
+        if ref is None:
+            return
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        p_ref, q_ref = ref(t)
+        p = msg.pose.position
+        o = msg.pose.orientation
+        self.pose_errors.append(float(np.linalg.norm(np.array([p.x, p.y, p.z]) - p_ref)))
+        dot = abs(float(np.dot([o.w, o.x, o.y, o.z], q_ref)))
+        self.angle_errors.append(2.0 * math.acos(min(1.0, dot)))
+
+    # -- sending ---------------------------------------------------------------------------------
+    def _send(self, t_target: float) -> None:
+        lengths, rates = self.source.at(t_target)
+        ns = int(round(t_target * 1e9))
+        if self.topic is T.COMMANDS:
+            d = M.float64_array(lengths)
+        else:
+            d = M.actuator_command(t_target, self.source.names, lengths, rates)
+            self.sent[ns] = time.perf_counter()
+        self.pub.publish(to_ros(self.topic.type, d))
+
+    def _wait_for_twin(self) -> None:
+        t_end = time.monotonic() + self.timeout
+        while self.sim_time is None and self.context.ok():
+            if time.monotonic() > t_end:
+                raise FlexmbError(f"no /clock or status from the twin within {self.timeout} s "
+                                  "(is `flexmb node` running on this ROS_DOMAIN_ID?)")
+            self.executor.spin_once(timeout_sec=0.05)
+        # let discovery of the command topic settle before the first command
+        t_end = time.monotonic() + self.timeout
+        while self.pub.get_subscription_count() == 0 and self.context.ok():
+            if time.monotonic() > t_end:
+                raise FlexmbError(f"the twin does not subscribe to {self.pub.topic_name}")
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def run(self) -> dict:
+        self._wait_for_twin()
+        t_start = time.perf_counter()
+        if self.mode == "lockstep":
+            self._run_lockstep()
+        else:
+            self._run_realtime()
+        # let the last answers arrive
+        t_end = time.monotonic() + 1.0
+        while self.sent and time.monotonic() < t_end and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.02)
+        return self.summary(time.perf_counter() - t_start)
+
+    def _run_lockstep(self) -> None:
+        t = self.sim_time
+        n = int(round((self.until - t) / self.dt))
+        for k in range(1, n + 1):
+            target = t + k * self.dt
+            ns = int(round(target * 1e9))
+            self._send(target)
+            t_end = time.monotonic() + self.timeout
+            if self.topic is T.COMMANDS:       # no stamp to match: wait for the twin's time to move on
+                while self.context.ok() and (self.sim_time or 0.0) < target - 0.5 * self.dt:
+                    if time.monotonic() > t_end:
+                        raise FlexmbError(f"the twin did not answer the command for t = {target:.6f} s "
+                                          f"within {self.timeout} s")
+                    self.executor.spin_once(timeout_sec=0.01)
+                continue
+            while self.context.ok() and self.answered_ns < ns:
+                if time.monotonic() > t_end:
+                    raise FlexmbError(f"the twin did not answer the command for t = {target:.6f} s within "
+                                      f"{self.timeout} s")
+                self.executor.spin_once(timeout_sec=0.01)
+
+    def _run_realtime(self) -> None:
+        period = 1.0 / self.rate
+        t0 = time.perf_counter()
+        k = 0
+        last = -1.0
+        while self.context.ok():
+            now = time.perf_counter()
+            t_twin = self.sim_time + (now - self.wall_at_sim_time)
+            if t_twin >= self.until:
+                break
+            # the estimate may step back when a /clock arrives late: stamps must never decrease
+            target = max(t_twin + self.dt, last + 1e-6)
+            self._send(target)
+            last = target
+            k += 1
+            deadline = t0 + k * period
+            while self.context.ok():
+                rem = deadline - time.perf_counter()
+                if rem <= 0:
+                    break
+                self.executor.spin_once(timeout_sec=rem)
+
+    def summary(self, wall: float) -> dict:
+        lat = np.array(self.latencies) if self.latencies else np.zeros(0)
+        out = {"mode": self.mode, "topic": self.topic.name, "wall_time_s": wall, "statuses": self.statuses,
+               "unconverged_reported": self.unconverged, "commands_unanswered": len(self.sent),
+               "latency_s": {"p50": float(np.percentile(lat, 50)) if lat.size else None,
+                             "p99": float(np.percentile(lat, 99)) if lat.size else None,
+                             "max": float(lat.max()) if lat.size else None, "count": int(lat.size)}}
+        if self.pose_errors:
+            out["tracking"] = {"max_position_error_m": max(self.pose_errors),
+                               "rms_position_error_m": float(np.sqrt(np.mean(np.square(self.pose_errors)))),
+                               "max_orientation_error_rad": max(self.angle_errors), "samples": len(self.pose_errors)}
+        s = self.last_status
+        if s is not None:
+            out["twin"] = {"sim_time_s": s.sim_time, "steps": int(s.steps), "deadline_misses": int(s.deadline_misses),
+                           "unconverged_steps": int(s.unconverged_steps), "rejected_commands": int(s.rejected_commands),
+                           "real_time_factor": s.real_time_factor}
+        return out
+
+    def close(self) -> None:
+        try:
+            self.executor.remove_node(self.node)
+        except Exception:
+            pass
+        self.node.destroy_node()
+
+
+def run_player(source: CommandSource, *, json_out: str | None = None, **kw) -> dict:
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(args=["flexmb_player"], context=context)
+    player = None
+    try:
+        player = Player(source, context=context, **kw)
+        summary = player.run()
+    finally:
+        if player is not None:
+            player.close()
+        if context.ok():
+            rclpy.shutdown(context=context)
+    if json_out:
+        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_out).write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -1,0 +1,60 @@
+"""The twin's ROS interface: topic names and message types (a contract; see README "ROS interface").
+
+Names starting with ``~/`` are private to the node and resolve to ``/<node name>/...``
+(default node name ``flexmb_twin``). Recordings (``flexmb node --mcap`` and ``flexmb run --mcap``)
+use the resolved names, so the two kinds of bag are interchangeable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+DEFAULT_NODE_NAME = "flexmb_twin"
+WORLD_FRAME = "world"
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str          # as declared (may start with "~/")
+    type: str          # ROS type, "pkg/msg/Type"
+    direction: str     # "in" (the twin subscribes) | "out" (the twin publishes)
+    doc: str
+
+    def resolved(self, node_name: str = DEFAULT_NODE_NAME) -> str:
+        return f"/{node_name}/{self.name[2:]}" if self.name.startswith("~/") else self.name
+
+
+# --- inputs -------------------------------------------------------------------------------------
+COMMANDS = Topic("~/commands", "std_msgs/msg/Float64MultiArray", "in",
+                 "actuator lengths (m), one per actuator in scene order (ForwardCommandController)")
+ACTUATOR_COMMANDS = Topic("~/actuator_commands", "flexmb_msgs/msg/ActuatorCommand", "in",
+                          "named actuator lengths (m), optional rates (m/s), stamped")
+TRAJECTORY = Topic("~/joint_trajectory", "trajectory_msgs/msg/JointTrajectory", "in",
+                   "actuator length trajectory, interpolated in time (cubic with velocities, else linear)")
+
+# --- outputs ------------------------------------------------------------------------------------
+JOINT_STATES = Topic("/joint_states", "sensor_msgs/msg/JointState", "out",
+                     "actuators: length (m), rate (m/s), axial force as effort (N); passive joints: angle (rad)")
+ACTUATOR_STATES = Topic("~/actuator_states", "flexmb_msgs/msg/ActuatorState", "out",
+                        "actuator lengths, rates, commanded lengths, axial forces")
+PLATFORM_POSE = Topic("~/platform_pose", "geometry_msgs/msg/PoseStamped", "out",
+                      "centroid and orientation of the scene's first platform_pose output")
+SHAPE = Topic("~/shape", "visualization_msgs/msg/MarkerArray", "out",
+              "deformed members as LINE_STRIP markers (node positions, m)")
+STATUS = Topic("~/status", "flexmb_msgs/msg/TwinStatus", "out",
+               "solver health of the last step, timing, deadline misses, rejected commands")
+CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", "out", "simulated time, when the node owns time")
+TF = Topic("/tf", "tf2_msgs/msg/TFMessage", "out",
+           "world → platform frames (recorded always; published live where tf2_msgs is installed)")
+
+INPUTS = (COMMANDS, ACTUATOR_COMMANDS, TRAJECTORY)
+OUTPUTS = (JOINT_STATES, ACTUATOR_STATES, PLATFORM_POSE, SHAPE, STATUS, CLOCK, TF)
+ALL = INPUTS + OUTPUTS
+
+
+def pose_topic(output_name: str, index: int) -> Topic:
+    """Topic of the ``index``-th ``platform_pose`` output: the first is ``~/platform_pose``,
+    further ones ``~/<output name>/platform_pose`` (every pose topic ends in ``platform_pose``)."""
+    if index == 0:
+        return PLATFORM_POSE
+    return Topic(f"~/{output_name}/platform_pose", PLATFORM_POSE.type, "out", PLATFORM_POSE.doc)

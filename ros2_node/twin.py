@@ -1,0 +1,215 @@
+"""The twin without ROS: a :class:`Simulator` stepped on external commands, reporting samples.
+
+The live node, ``flexmb run --mcap`` and ``flexmb replay`` all step through :class:`TwinRunner`,
+so a lockstep node run and an offline replay of its recorded commands are the same computation.
+
+Command timing, the one rule everything relies on: a command accepted while the twin is at
+simulated time ``t_n`` takes effect on the step ``t_n → t_n + Δt``, whose actuator lengths are
+the command schedule evaluated at ``t_n + Δt``. A recording stores each command with log time
+``t_n`` (ns of simulated time), so a replay re-applies it before the same step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexmb_core.errors import ConvergenceError, FlexmbError
+from flexmb_core.model.model import Model
+from flexmb_core.report import TwinReporter, TwinSample
+from flexmb_core.scene.schema import SolverSpec
+from flexmb_core.simulator import Simulator
+
+from .commands import CommandSchedule, Rejection
+
+
+@dataclass
+class RunnerOptions:
+    """How the twin treats its inputs (the node's parameters of the same names)."""
+
+    command_source: str = "external"      # external (topics) | scene (the scene's own commands)
+    command_timeout: float = 0.5          # s of simulated time; inf disables
+    timeout_behaviour: str = "hold"       # hold | ramp_to_rest
+    ramp_time: float = 2.0                # s
+    stale_after: float = 1.0              # s
+    max_lead: float = 1.0                 # s
+
+    def validate(self) -> None:
+        if self.command_source not in ("external", "scene"):
+            raise FlexmbError(f"command_source must be 'external' or 'scene', got {self.command_source!r}")
+        if self.timeout_behaviour not in ("hold", "ramp_to_rest"):
+            raise FlexmbError(f"command_timeout_behaviour must be 'hold' or 'ramp_to_rest', got "
+                              f"{self.timeout_behaviour!r}")
+        for name in ("command_timeout", "ramp_time", "stale_after", "max_lead"):
+            v = getattr(self, name)
+            if not (v > 0):
+                raise FlexmbError(f"{name} must be > 0 (s), got {v}")
+
+
+@dataclass
+class StepOutcome:
+    """What one :meth:`TwinRunner.step` did (read the state with :meth:`TwinRunner.sample`)."""
+
+    advanced: bool                 # False: the step failed and the state was kept
+    converged: bool
+    message: str = ""
+
+
+@dataclass
+class RunnerCounters:
+    steps: int = 0                 # steps attempted
+    failed_steps: int = 0          # steps rejected (no convergence, or a non-finite state)
+    flagged_steps: int = 0         # steps accepted unconverged (policy accept_flagged)
+    substepped_steps: int = 0
+    last_message: str = ""
+    rejections: dict = field(default_factory=dict)   # kind → count
+
+
+class TwinRunner:
+    """Steps one compiled model on external (or scene) commands and reports :class:`TwinSample`.
+
+    Never raises on a bad step: a step that does not converge (after the scene's
+    ``on_unconverged`` policy) or leaves a non-finite state is rolled back and reported in the
+    outcome; the next call tries again from the last good state with the commands then in force.
+    """
+
+    def __init__(self, model: Model, spec: SolverSpec | None = None, options: RunnerOptions | None = None):
+        self.model = model
+        self.options = options or RunnerOptions()
+        self.options.validate()
+        self.sim = Simulator(model, spec)
+        if self.sim.spec.analysis != "dynamic":
+            raise FlexmbError(f"scene '{model.scene.name}': the twin steps dynamics; solver.analysis is "
+                              f"'{self.sim.spec.analysis}'")
+        self.dt = float(self.sim.spec.dt)
+        self.reporter = TwinReporter(model)
+        self.counters = RunnerCounters()
+        self.schedule: CommandSchedule | None = None
+        self._backup = None
+        self._member_kinds = tuple(m.kind for m in model.members)
+
+    @property
+    def member_kinds(self) -> tuple[str, ...]:
+        return self._member_kinds
+
+    @property
+    def t(self) -> float:
+        return float(self.sim.state.t)
+
+    def start(self, warmup: bool = True) -> TwinSample:
+        """Compile/load the kernels, set up the initial state (the scene's ``initial_state``)."""
+        if warmup:
+            self.sim.warmup()
+        act = self.model.actuators
+        rest = self.sim.command_lengths(self.sim.state.t)
+        if self.options.command_source == "external" and act.l0.size:
+            self.schedule = CommandSchedule(act.names, act.stroke, rest, timeout=self.options.command_timeout,
+                                            behaviour=self.options.timeout_behaviour,
+                                            ramp_time=self.options.ramp_time,
+                                            stale_after=self.options.stale_after, max_lead=self.options.max_lead)
+            self.sim.set_commands(rest)
+        self.sim.initialize()
+        self._backup = self.sim.state.copy()
+        return self.reporter.read(self.sim)
+
+    # -- inputs (return None when accepted) ----------------------------------------------------
+    def _count(self, r: Rejection | None) -> Rejection | None:
+        if r is not None:
+            self.counters.rejections[r.kind] = self.counters.rejections.get(r.kind, 0) + 1
+        return r
+
+    def _need_schedule(self, topic: str) -> CommandSchedule:
+        if self.schedule is None:
+            why = ("the scene has no actuators" if not self.model.actuators.l0.size
+                   else "command_source is 'scene'")
+            raise FlexmbError(f"{topic}: this twin takes no external commands ({why})")
+        return self.schedule
+
+    def command_array(self, topic: str, values) -> Rejection | None:
+        return self._count(self._need_schedule(topic).command_array(topic, values, self.t))
+
+    def command_named(self, topic: str, names, lengths, velocities=None, stamp: float = 0.0) -> Rejection | None:
+        return self._count(self._need_schedule(topic).command_named(topic, names, lengths, velocities, stamp, self.t))
+
+    def command_trajectory(self, topic: str, names, stamp: float, points) -> Rejection | None:
+        return self._count(self._need_schedule(topic).command_trajectory(topic, names, stamp, points, self.t))
+
+    @property
+    def rejected_commands(self) -> int:
+        return sum(self.counters.rejections.values())
+
+    @property
+    def newest_command_stamp(self) -> float:
+        return self.schedule.newest_stamp if self.schedule is not None else 0.0
+
+    # -- stepping ------------------------------------------------------------------------------
+    def step(self) -> StepOutcome:
+        """Advance one Δt on the commands in force (see the module's timing rule)."""
+        sim, c = self.sim, self.counters
+        c.steps += 1
+        t_new = sim.state.t + self.dt
+        if self.schedule is not None:
+            sim.set_commands(self.schedule.lengths_at(t_new), check=False)   # validated on reception
+        self._backup.assign(sim.state)
+        message = ""
+        try:
+            res = sim.step(self.dt)
+            converged = bool(res.converged)
+            if not converged:
+                c.flagged_steps += 1
+                message = f"step to t = {t_new:.6g} s accepted unconverged: {res.message}"
+            elif res.substeps > 1:
+                c.substepped_steps += 1
+                message = res.message
+        except ConvergenceError as exc:
+            sim.state.assign(self._backup)
+            c.failed_steps += 1
+            c.last_message = f"step to t = {t_new:.6g} s rejected, state kept at t = {sim.state.t:.6g} s: {exc}"
+            return StepOutcome(False, False, c.last_message)
+        st = sim.state
+        if not (np.isfinite(st.q).all() and np.isfinite(st.v).all()):
+            sim.state.assign(self._backup)
+            c.failed_steps += 1
+            c.last_message = f"step to t = {t_new:.6g} s produced non-finite values; state kept at t = {sim.state.t:.6g} s"
+            return StepOutcome(False, False, c.last_message)
+        if message:
+            c.last_message = message
+        return StepOutcome(True, converged, message)
+
+    def sample(self) -> TwinSample:
+        """The current state as a :class:`TwinSample` (the same object every call)."""
+        return self.reporter.read(self.sim)
+
+
+def stamp_to_seconds(sec: int, nanosec: int) -> float:
+    return sec + 1e-9 * nanosec
+
+
+def time_from_start(d) -> float:
+    """Seconds of a ``builtin_interfaces/Duration`` (dict or message)."""
+    if isinstance(d, dict):
+        return d["sec"] + 1e-9 * d["nanosec"]
+    return d.sec + 1e-9 * d.nanosec
+
+
+def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:
+    """Feed one decoded command message (rclpy message or dict) to the runner.
+
+    ``topic_kind`` is ``commands`` (Float64MultiArray), ``actuator_commands`` (ActuatorCommand) or
+    ``joint_trajectory`` (JointTrajectory).
+    """
+    get = (lambda m, k: m[k]) if isinstance(msg, dict) else getattr
+    if topic_kind == "commands":
+        return runner.command_array(topic, list(get(msg, "data")))
+    if topic_kind == "actuator_commands":
+        st = get(get(msg, "header"), "stamp")
+        return runner.command_named(topic, list(get(msg, "names")), list(get(msg, "lengths")),
+                                    list(get(msg, "velocities")), stamp_to_seconds(get(st, "sec"), get(st, "nanosec")))
+    if topic_kind == "joint_trajectory":
+        st = get(get(msg, "header"), "stamp")
+        pts = [(time_from_start(get(p, "time_from_start")), list(get(p, "positions")), list(get(p, "velocities")))
+               for p in get(msg, "points")]
+        return runner.command_trajectory(topic, list(get(msg, "joint_names")),
+                                         stamp_to_seconds(get(st, "sec"), get(st, "nanosec")), pts)
+    raise ValueError(f"unknown command topic kind {topic_kind!r}")
