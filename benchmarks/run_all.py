@@ -5,7 +5,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-BENCHMARKS = ["b1_cantilever.py", "stewart_platform.py", "bench_linear_solvers.py"]
+BENCHMARKS = ["b1_cantilever.py", "stewart_platform.py", "bench_linear_solvers.py", "node_latency.py"]
 
 if __name__ == "__main__":
     for b in BENCHMARKS:

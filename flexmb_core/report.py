@@ -124,8 +124,12 @@ class TwinReporter:
             member_xyz=xyz,
         )
 
-    def read(self, sim: Simulator) -> TwinSample:
-        """The sample at the simulator's current state (the same object every call)."""
+    def read(self, sim: Simulator, full: bool = True) -> TwinSample:
+        """The sample at the simulator's current state (the same object every call).
+
+        ``full=False`` refreshes the actuator and joint values and the solver health only (what
+        ``/joint_states`` and the status need); poses and member shapes keep older values.
+        """
         model, st, s = self.model, sim.state, self.sample
         q, v = st.q, st.v
         s.t = float(st.t)
@@ -140,9 +144,10 @@ class TwinReporter:
             lo = joint_angle(model, q - _RATE_STEP * v, o.node, o.nodes)
             # unwrap across ±π before differencing
             s.joint_velocities[k] = np.angle(np.exp(1j * (hi - lo))) / (2.0 * _RATE_STEP)
-        for p, observe in zip(s.poses, self._pose_observers):
-            observe(q, p.position, p.orientation_wxyz)
-        np.take(q, self._member_ids, out=s.member_xyz)
+        if full:
+            for p, observe in zip(s.poses, self._pose_observers):
+                observe(q, p.position, p.orientation_wxyz)
+            np.take(q, self._member_ids, out=s.member_xyz)
         r = sim.last
         if r is not None:
             s.kinetic_energy, s.strain_energy, s.total_energy = r.kinetic, r.strain, r.total_energy

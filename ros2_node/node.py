@@ -85,6 +85,9 @@ class TwinNode:
                 value = float(value)
             effective[spec.name] = self.node.declare_parameter(spec.name, value, desc).value
         self.p = NodeParams.from_values(effective)
+        if self.p.mode == "lockstep" and self.p.command_source == "scene":
+            raise FlexmbError("parameter 'mode': lockstep steps once per received command, so it needs "
+                              "command_source 'external', got 'scene'")
         self.node.add_on_set_parameters_callback(self._on_set_parameters)
 
         # -- the twin: compile, warm up, initial state (outside any timed loop) ---------------------
@@ -264,7 +267,7 @@ class TwinNode:
         shape_due = self._shape_every and k % self._shape_every == 0
         if not (due or on_command or shape_due or ack):
             return
-        s = self.runner.sample()
+        s = self.runner.sample(full=bool(due or shape_due))
         t = s.t
         if not s.is_finite():       # never publish NaN (the runner rolls such steps back already)
             self._warn("nan", f"non-finite output at t = {t:.6g} s withheld")

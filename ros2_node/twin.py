@@ -177,9 +177,10 @@ class TwinRunner:
             c.last_message = message
         return StepOutcome(True, converged, message)
 
-    def sample(self) -> TwinSample:
-        """The current state as a :class:`TwinSample` (the same object every call)."""
-        return self.reporter.read(self.sim)
+    def sample(self, full: bool = True) -> TwinSample:
+        """The current state as a :class:`TwinSample` (the same object every call); see
+        :meth:`TwinReporter.read` for ``full``."""
+        return self.reporter.read(self.sim, full)
 
 
 def stamp_to_seconds(sec: int, nanosec: int) -> float:
