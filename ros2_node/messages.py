@@ -18,7 +18,8 @@ from .topics import WORLD_FRAME
 
 MARKER_LINE_STRIP = 4
 MARKER_ADD = 0
-_MEMBER_RGBA = {"actuator": (0.95, 0.55, 0.10, 1.0), "frame": (0.35, 0.55, 0.85, 1.0),
+# member colours by kind (RViz markers and the rerun view use the same)
+MEMBER_RGBA = {"actuator": (0.95, 0.55, 0.10, 1.0), "frame": (0.35, 0.55, 0.85, 1.0),
                 "truss": (0.55, 0.75, 0.40, 1.0)}
 
 
@@ -82,7 +83,7 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None) -> dict:
     """``visualization_msgs/MarkerArray``: one LINE_STRIP per member through its nodes."""
     markers = []
     for k, (name, pts) in enumerate(zip(s.member_names, s.member_points)):
-        r, g, b, a = _MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", _MEMBER_RGBA["frame"])
+        r, g, b, a = MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", MEMBER_RGBA["frame"])
         markers.append({
             "header": header(s.t), "ns": name, "id": k, "type": MARKER_LINE_STRIP, "action": MARKER_ADD,
             "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),

@@ -294,7 +294,8 @@ class TwinNode:
             kinds = self.runner.member_kinds
             self._out(T.SHAPE, live.fill_shape(s, kinds), lambda: M.shape(s, kinds), t)
             if self.rerun is not None:
-                self.rerun.log_sample(s)
+                self.rerun.log_sample(s, {"step_wall_time": self._last_step_wall, "real_time_factor": self._rtf(),
+                                          "message": outcome_message})
 
     # -- stepping -------------------------------------------------------------------------------------
     def _step(self) -> None:

@@ -1,0 +1,291 @@
+"""rerun viewing: ``flexmb run --rrd``, ``flexmb view`` of recordings, the headless PNG.
+
+Each ``.rrd`` is read back with ``rerun.chunk.RrdReader`` and checked for its entities (one per
+member, the platform, the scalar series), its time points on ``sim_time`` and some values against
+what the run reported. The recordings are written by ``twin_recording`` (this directory) from a
+short simulation of the bar-legged Stewart platform.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"
+MEMBERS = ["leg1", "leg2", "leg3", "leg4", "leg5", "leg6", "edge_ab", "edge_bc", "edge_ca"]
+SERIES = ["plots/actuators/length", "plots/actuators/command", "plots/actuators/velocity",
+          "plots/actuators/force", "plots/solver/newton_iterations", "plots/solver/residual",
+          "plots/energy"]
+PLATFORM = ["world/platforms/platform/frame", "world/platforms/platform/mesh",
+            "world/platforms/platform/outline"]
+ORANGE = (242, 140, 26)          # actuator colour (ros2_node.messages), as 8-bit RGB
+
+try:
+    import rerun  # noqa: F401
+    HAVE_RERUN = True
+except ImportError:
+    HAVE_RERUN = False
+needs_rerun = pytest.mark.skipif(not HAVE_RERUN, reason="rerun-sdk is not installed")
+
+
+def flexmb(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "ros2_node.cli", *map(str, args)], capture_output=True,
+                          text=True, cwd=ROOT, timeout=timeout)
+
+
+class Rrd:
+    """What an .rrd holds: time points (ns on sim_time) and static components per entity."""
+
+    def __init__(self, path: Path):
+        import pyarrow as pa
+        from rerun.chunk import RrdReader
+
+        reader = RrdReader(str(path))
+        self.recordings = reader.recordings()
+        self.blueprints = reader.blueprints()
+        self.times: dict[str, set[int]] = defaultdict(set)
+        self.static: dict[str, set[str]] = defaultdict(set)
+        self._rows: dict[str, list[tuple[int, dict]]] = defaultdict(list)
+        for chunk in reader.stream():
+            path_ = chunk.entity_path.strip("/")
+            rb = chunk.to_record_batch()
+            comps = [n for n in rb.schema.names if ":" in n]
+            if chunk.is_static:
+                self.static[path_].update(comps)
+                continue
+            ts = rb.column("sim_time").cast(pa.int64()).to_pylist()
+            cols = {c: rb.column(c).to_pylist() for c in comps}
+            for i, t in enumerate(ts):
+                self.times[path_].add(t)
+                self._rows[path_].append((t, {c: v[i] for c, v in cols.items()}))
+
+    def last(self, entity: str, component: str):
+        """The value of ``component`` at the entity's last time."""
+        return max(self._rows[entity], key=lambda r: r[0])[1][component]
+
+
+def _grid_ns(times_s) -> set[int]:
+    return {int(round(t * 1e9)) for t in times_s}
+
+
+# --- fixtures ---------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A bare .mcap of 200 steps (every step recorded) with the scene attached."""
+    pytest.importorskip("mcap_ros2")
+    from twin_recording import write_recording
+
+    return write_recording(SCENE, tmp_path_factory.mktemp("rec") / "stewart.mcap", until=0.2)
+
+
+@pytest.fixture(scope="module")
+def recording_rrd(recording, tmp_path_factory):
+    if not HAVE_RERUN:
+        pytest.skip("rerun-sdk is not installed")
+    out = tmp_path_factory.mktemp("view") / "stewart.rrd"
+    p = flexmb("view", recording["path"], "--rrd", out)
+    assert p.returncode == 0, p.stderr
+    return out, p.stdout
+
+
+# --- the command line without rerun -----------------------------------------------------------
+def test_cli_loads_without_rerun_and_names_the_missing_package():
+    code = ("import sys; sys.modules['rerun'] = None\n"       # `import rerun` now raises ImportError
+            "import ros2_node.viz.cli, ros2_node.cli\n"
+            "p = ros2_node.cli.build_parser()\n"
+            "a = p.parse_args(['view', 'x.mcap', '--png', 'o.png'])\n"
+            "r = p.parse_args(['run', 's.yaml', '--rrd', 'o.rrd', '--rrd-period', '0.02'])\n"
+            "assert a.func.__name__ == 'cmd_view' and r.rrd == 'o.rrd' and r.rrd_period == 0.02\n"
+            "assert not any(m.startswith('rerun') and sys.modules[m] is not None for m in sys.modules)\n"
+            "sys.exit(ros2_node.cli.main(['view', 'x.mcap']))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert p.returncode == 1, p.stderr
+    assert "flexmb view needs rerun-sdk" in p.stderr
+
+
+# --- flexmb run --rrd -------------------------------------------------------------------------
+@needs_rerun
+def test_run_rrd_logs_members_platform_and_series_every_10_ms(tmp_path):
+    rrd, js = tmp_path / "run.rrd", tmp_path / "run.json"
+    p = flexmb("run", SCENE, "--until", "0.2", "--rrd", rrd, "--json", js, "--quiet")
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(js.read_text())
+    assert summary["rrd"] == str(rrd) and summary["steps"] == 200
+    data = Rrd(rrd)
+    assert len(data.recordings) == 1 and len(data.blueprints) == 1
+    expected = _grid_ns(0.01 * k for k in range(21))           # t = 0 and every 10 ms to 0.2 s
+    for entity in [f"world/members/{m}" for m in MEMBERS] + PLATFORM + SERIES:
+        assert data.times[entity] == expected, entity
+    # solver wall time and real-time factor exist from the first step on (not at t = 0)
+    assert data.times["plots/solver/step_wall_time"] == expected - {0}
+    # static geometry and styles are logged once
+    assert {"LineStrips3D:radii", "LineStrips3D:colors"} <= data.static["world/members/leg1"]
+    assert "Points3D:positions" in data.static["world/supports"]
+    assert "Mesh3D:triangle_indices" in data.static["world/platforms/platform/mesh"]
+    # the last logged state is the state the run ended in
+    lengths = data.last("plots/actuators/length", "Scalars:scalars")
+    assert len(lengths) == 6 and lengths[0] == pytest.approx(summary["outputs"]["leg1_length"], abs=1e-12)
+    forces = data.last("plots/actuators/force", "Scalars:scalars")
+    assert forces[3] == pytest.approx(summary["outputs"]["leg4_force"], rel=1e-12)
+    pos = data.last("world/platforms/platform/frame", "Transform3D:translation")
+    assert np.allclose(pos, summary["outputs"]["platform"]["position"], atol=1e-6)   # float32 in rerun
+    leg1 = np.array(data.last("world/members/leg1", "LineStrips3D:strips")[0])
+    assert leg1.shape == (2, 3) and np.linalg.norm(leg1[1] - leg1[0]) == pytest.approx(lengths[0], abs=1e-6)
+
+
+@needs_rerun
+def test_run_rrd_period_always_logs_the_last_step(tmp_path):
+    rrd = tmp_path / "run.rrd"
+    p = flexmb("run", SCENE, "--until", "0.123", "--rrd", rrd, "--rrd-period", "0.05", "--quiet")
+    assert p.returncode == 0, p.stderr
+    times = Rrd(rrd).times
+    assert times["world/members/leg1"] == _grid_ns([0.0, 0.05, 0.1, 0.123])
+    assert times["plots/energy"] == times["world/members/leg1"]
+
+
+# --- flexmb view of a recording ---------------------------------------------------------------
+@needs_rerun
+def test_view_mcap_uses_header_stamps_and_the_attached_scene(recording, recording_rrd):
+    rrd, stdout = recording_rrd
+    assert "scene 'stewart_platform_bars'" in stdout and "t = 0 … 0.2 s" in stdout
+    data = Rrd(rrd)
+    expected = _grid_ns(recording["times"])
+    assert len(expected) == 201                              # t = 0 and every 1 ms step
+    for entity in [f"world/members/{m}" for m in MEMBERS] + PLATFORM + SERIES + ["plots/actuators/input"]:
+        assert data.times[entity] == expected, entity
+    # member kinds, supports and the camera come from scene.yaml
+    assert "Points3D:positions" in data.static["world/supports"]
+    # values survive MCAP → rerun: the final recorded state
+    from ros2_node.viz.recording import Recording
+
+    last = [m.msg for m in Recording(recording["path"]).messages({"/flexmb_twin/actuator_states"})][-1]
+    assert data.last("plots/actuators/length", "Scalars:scalars") == pytest.approx(list(last.lengths), abs=0)
+    assert data.last("plots/actuators/force", "Scalars:scalars") == pytest.approx(list(last.axial_forces), abs=0)
+
+
+@needs_rerun
+def test_view_without_scene_draws_from_the_markers(tmp_path):
+    from twin_recording import write_recording
+
+    rec = write_recording(SCENE, tmp_path / "bare.mcap", until=0.02, attach_scene=False)
+    rrd = tmp_path / "bare.rrd"
+    p = flexmb("view", rec["path"], "--rrd", rrd)
+    assert p.returncode == 0, p.stderr
+    assert "no scene attached" in p.stdout
+    data = Rrd(rrd)
+    expected = _grid_ns(rec["times"])
+    for m in MEMBERS:
+        assert data.times[f"world/members/{m}"] == expected, m
+    assert data.times["world/platforms/platform/frame"] == expected
+    # no scene: no supports, no platform outline (its nodes are unknown), colours from the markers
+    assert "world/supports" not in data.static and "world/platforms/platform/mesh" not in data.times
+    rgba = data.static["world/members/leg1"]
+    assert "LineStrips3D:colors" in rgba
+
+
+@needs_rerun
+def test_view_rosbag2_directory_with_period(tmp_path):
+    from twin_recording import write_recording
+
+    rec = write_recording(SCENE, tmp_path / "bag", until=0.05, bag=True)
+    assert (tmp_path / "bag" / "metadata.yaml").is_file()
+    rrd = tmp_path / "bag.rrd"
+    p = flexmb("view", rec["path"], "--rrd", rrd, "--period", "0.01")
+    assert p.returncode == 0, p.stderr
+    data = Rrd(rrd)
+    assert data.times["world/members/leg3"] == _grid_ns(0.01 * k for k in range(6))
+    assert data.times["plots/solver/residual"] == data.times["world/members/leg3"]
+
+
+@needs_rerun
+def test_view_reads_a_bag_of_the_recorder(tmp_path):
+    """Bags of ``ros2_node.bag.recorder`` (log time = simulated time, chunks per 0.25 s) view alike."""
+    recorder = pytest.importorskip("ros2_node.bag.recorder")
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.report import TwinReporter
+    from flexmb_core.scene import load_scene
+    from flexmb_core.simulator import Simulator
+    from ros2_node import messages, topics
+
+    model = compile_scene(load_scene(SCENE))
+    sim = Simulator(model)
+    sim.initialize()
+    reporter = TwinReporter(model)
+    kinds = tuple(m.kind for m in model.members)
+    times = []
+    with recorder.BagRecorder(tmp_path / "bag", scene_path=str(SCENE), scene_text=None, settings={}) as rec:
+        for k in range(31):
+            if k:
+                sim.step()
+            s = reporter.read(sim)
+            times.append(s.t)
+            out = ((topics.SHAPE, messages.shape(s, kinds)),
+                   (topics.STATUS, messages.status(s, messages.StatusTiming())),
+                   (topics.ACTUATOR_STATES, messages.actuator_state(s)),
+                   (topics.PLATFORM_POSE, messages.platform_pose(s)),
+                   (topics.JOINT_STATES, messages.joint_state(s)))
+            for topic, msg in out:
+                rec.write(topic.resolved(), topic.type, msg, s.t)
+    rrd = tmp_path / "bag.rrd"
+    p = flexmb("view", tmp_path / "bag", "--rrd", rrd)
+    assert p.returncode == 0, p.stderr
+    assert "scene 'stewart_platform_bars'" in p.stdout
+    data = Rrd(rrd)
+    for entity in [f"world/members/{m}" for m in MEMBERS] + PLATFORM + SERIES:
+        assert data.times[entity] == _grid_ns(times), entity
+
+
+@needs_rerun
+def test_view_reads_a_file_cut_short(recording, tmp_path):
+    """A killed recorder leaves no summary and an unfinished chunk: keep what is complete."""
+    from ros2_node.viz.view import view_recording
+    from twin_recording import write_recording
+
+    rec = write_recording(SCENE, tmp_path / "long.mcap", until=0.2, attach_scene=False, chunk_size=16 << 10)
+    raw = Path(rec["path"]).read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(raw[: int(0.6 * len(raw))])
+    with pytest.warns(UserWarning, match="damaged or unfinished"):
+        report = view_recording(cut, rrd_path=str(tmp_path / "cut.rrd"))
+    assert report.truncated
+    n = report.messages["/flexmb_twin/shape"]
+    assert 0 < n < 201
+    assert len(Rrd(tmp_path / "cut.rrd").times["world/members/leg1"]) == n
+
+
+def test_view_rejects_what_is_not_a_recording(tmp_path):
+    if not HAVE_RERUN:
+        pytest.skip("rerun-sdk is not installed")
+    p = flexmb("view", tmp_path / "missing")
+    assert p.returncode == 1
+    assert "missing: no such file or directory" in p.stderr
+    (tmp_path / "empty").mkdir()
+    p = flexmb("view", tmp_path / "empty")
+    assert p.returncode == 1 and "no .mcap file in this directory" in p.stderr
+
+
+# --- headless PNG -----------------------------------------------------------------------------
+@needs_rerun
+def test_png_snapshot_shows_the_legs(recording, tmp_path):
+    from ros2_node.viz.snapshot import rerun_executable, vulkan_drivers
+
+    if rerun_executable() is None or not vulkan_drivers():
+        pytest.skip("no rerun viewer binary or no Vulkan driver (apt-get install mesa-vulkan-drivers)")
+    image = pytest.importorskip("PIL.Image")
+    png = tmp_path / "shot.png"
+    p = flexmb("view", recording["path"], "--png", png, "--window-size", "800x450", timeout=240)
+    assert p.returncode == 0, p.stderr
+    assert f"wrote {png}" in p.stdout
+    img = np.asarray(image.open(png).convert("RGB")).astype(int)
+    assert img.shape[2] == 3 and img.shape[1] >= 800 and img.shape[0] >= 450
+    # the actuator legs are drawn: many pixels of their colour in the 3D view (left 60 %)
+    left = img[:, : int(0.6 * img.shape[1])]
+    orange = np.all(np.abs(left - np.array(ORANGE)) < 40, axis=2)
+    assert orange.mean() > 0.005, f"only {orange.mean():.4f} of the 3D view is leg-coloured"
