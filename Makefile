@@ -23,7 +23,11 @@ EXTRAS := dev,ros,ros-build,record,viz,bench
 MSGS_BUILD := $(CURDIR)/build/msgs
 MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.msg msgs/srv/*.srv))
 
-DEMO_CMD ?= $(VENV)/bin/flexmb run scenes/stewart_platform.yaml --json build/demo.json
+# The Stewart twin end to end: the node and the command player as two processes on DDS (real
+# time, Δt = 1 ms, the 20 s appendix trajectory), recorded to MCAP, then shown in rerun (an .rrd).
+DEMO_SCENE ?= scenes/stewart_platform_realtime.yaml
+DEMO_CMD ?= $(VENV)/bin/flexmb demo $(DEMO_SCENE) --mcap build/demo/bag --out build/demo \
+	&& $(VENV)/bin/flexmb view build/demo/bag --rrd build/demo/stewart.rrd
 PYTEST_ARGS ?=
 
 # Environment of every recipe. DDS discovery never leaves the machine (the discovery range is the

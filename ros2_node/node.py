@@ -15,6 +15,7 @@ cache load) happens before the first step, outside the timed loop.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import json
 import math
 import time
@@ -142,10 +143,17 @@ class TwinNode:
         self.recorder = None
         if self.p.record:
             from .bag.recorder import BagRecorder
-            settings = {"dt": self.dt, "integrator": self.runner.sim.spec.integrator, "mode": self.p.mode,
-                        "node_name": n, "runner_options": vars(options), "source": "flexmb node"}
-            self.recorder = BagRecorder(self.p.record, scene_path=self.p.scene, scene_text=scene.source,
-                                        settings=settings, node_name=n)
+            spec = self.runner.sim.spec
+            # the same keys as an offline run's (ros2_node.bag.run_hook.run_settings), plus the node's
+            settings = {"source": "flexmb node", "solver": dataclasses.asdict(spec),
+                        "runner_options": dataclasses.asdict(options), "dt": repr(float(spec.dt)),
+                        "integrator": spec.integrator, "tolerance": repr(float(spec.tolerance)),
+                        "mode": self.p.mode, "node_name": n, "parameters": dataclasses.asdict(self.p)}
+            self.recorder = BagRecorder(self.p.record, scene_path=self.p.scene, scene_text=None,
+                                        settings=settings, node_name=n, qos_depth=self.p.qos_depth)
+            recorded = [t for t, _ in _INPUTS] + outputs + ([T.TF] if self._pose_topics and T.TF not in outputs else [])
+            for topic in recorded:       # schemas and encoders now, not at a first message mid-loop
+                self.recorder.declare(topic.resolved(n), topic.type)
         self.rerun = None
         if self.p.rrd:
             from .viz.rerun_log import TwinRerunLogger

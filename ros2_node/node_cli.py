@@ -9,6 +9,7 @@ import argparse
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -77,6 +78,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     node_json, player_json = out / "node.json", out / "player.json"
     for f in (node_json, player_json):
         f.unlink(missing_ok=True)
+    if args.mcap and (Path(args.mcap) / "metadata.yaml").exists():
+        shutil.rmtree(args.mcap)           # the previous demo's recording (a rosbag2 directory)
     exe = [sys.executable, "-m", "ros2_node.cli"]
     node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--duration", str(args.until),
                       "--summary-json", str(node_json), "--quiet", "--idle-timeout", "10"]
@@ -91,18 +94,25 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
           f"{args.mode}, {args.until:g} s", flush=True)
     node = subprocess.Popen(node_cmd, env=env)
+    player = subprocess.Popen(play_cmd, env=env)
+    t_end = time.monotonic() + args.until * 20 + 300
     try:
-        player = subprocess.run(play_cmd, env=env, timeout=args.until * 20 + 300)
+        while player.poll() is None:
+            if node.poll() not in (None, 0) or time.monotonic() > t_end:
+                break                      # the node failed (its message is above) or we ran out of time
+            time.sleep(0.1)
+        if player.poll() is None:
+            player.send_signal(signal.SIGINT)
+            player.wait(timeout=30)
         node.wait(timeout=120)
     except (subprocess.TimeoutExpired, KeyboardInterrupt):
-        node.send_signal(signal.SIGINT)
-        node.wait(timeout=30)
         print("flexmb demo: interrupted or timed out", file=sys.stderr)
         return 2
     finally:
-        if node.poll() is None:
-            node.send_signal(signal.SIGINT)
-            node.wait(timeout=30)
+        for proc in (player, node):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                proc.wait(timeout=30)
     if player.returncode != 0 or node.returncode != 0 or not node_json.exists() or not player_json.exists():
         print(f"flexmb demo: node exit {node.returncode}, player exit {player.returncode}", file=sys.stderr)
         return 2
@@ -129,6 +139,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"  recording: {args.mcap}")
     print(f"  summary: {out / 'summary.json'}")
     return 0
+
+
+def cmd_replay_live(args: argparse.Namespace) -> int:
+    _localhost_only()
+    from .live_replay import replay_live
+
+    return replay_live(args.bag, out=args.out, timeout=args.timeout, abs_tol=args.abs_tol, rel_tol=args.rel_tol)
 
 
 def register(verbs, run_parser) -> None:
@@ -169,6 +186,15 @@ def register(verbs, run_parser) -> None:
     p.add_argument("--json", metavar="OUT", help="write the player summary here")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_play)
+
+    rl = verbs.add_parser("replay-live", help="replay a recording into a live lockstep node over DDS and "
+                          "compare the node's new recording with it")
+    rl.add_argument("bag", help="a `flexmb run --mcap` or lockstep-node recording (one command per step)")
+    rl.add_argument("--out", required=True, help="directory of the node's new recording")
+    rl.add_argument("--timeout", type=float, default=30.0, help="s to wait for each acknowledgement")
+    rl.add_argument("--abs-tol", type=float, default=1e-9, help="absolute tolerance of every number")
+    rl.add_argument("--rel-tol", type=float, default=1e-9, help="tolerance relative to the peak of each field")
+    rl.set_defaults(func=cmd_replay_live)
 
     d = verbs.add_parser("demo", help="twin node + player as two processes on DDS, with a summary")
     d.add_argument("scene", nargs="?", default="scenes/stewart_platform.yaml")

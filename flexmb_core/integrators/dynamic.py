@@ -4,8 +4,14 @@ form (equilibrium at t_{n+1}, SPEC §1.7). Newmark is the αm = αf = 0 member o
 Unknowns at t_{n+1}: q. With the pseudo-acceleration ã,
     ã(q) = (q − q_n − Δt v_n − Δt²(½−β) ã_n) / (β Δt²)
     a(q) = ((1−αm) ã(q) + αm ã_n − αf a_n) / (1−αf),   v(q) = v_n + Δt[(1−γ) ã_n + γ ã(q)]
-    residual  r(q) = f_int(q; λ_{n+1}) + M (a + c_m v) − f_ext(t_{n+1})
-    tangent   K + (c_a + c_m c_v) M,  c_a = (1−αm)/((1−αf) β Δt²),  c_v = γ/(β Δt)
+    residual  r(q) = f_int(q, v(q); λ_{n+1}, λ̇_{n+1}) + M (a + c_m v) − f_ext(t_{n+1})
+    tangent   K + c_v C + (c_a + c_m c_v) M,  c_a = (1−αm)/((1−αf) β Δt²),  c_v = γ/(β Δt)
+
+f_int holds the elastic and, for materials with ``eta`` > 0, the Kelvin–Voigt viscous forces;
+K = ∂f_int/∂q at fixed v (non-symmetric with damping) and C = ∂f_int/∂v. The actuator stretch rate
+λ̇_{n+1} (read by damped actuators only) is the second-order backward difference of the last three
+stretches unless the caller passes it (first order on the first step after a start or a restore:
+a first-order rate would leave an O(Δt) viscous-force error, EA·τ·λ̈·Δt/2, in the leg forces).
 
 ``chung_hulbert`` is the original generalized-α (Chung & Hulbert 1993): inertia at t_{n+1−αm} and
 internal/external forces at the *interpolated configuration* q_{n+1−αf} = (1−αf) q_{n+1} + αf q_n.
@@ -31,7 +37,7 @@ from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
 from .energy import csr_matvec, energies
-from .fused import apply_increment, inertial_residual, update_rates
+from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
 
 
 def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
@@ -69,6 +75,13 @@ class DynamicIntegrator:
         self._q_hat = np.zeros(n)
         self._w = np.zeros(n)
         self._q_eval = np.zeros(n)
+        self._v_eval = np.zeros(n)
+        self._damped = model.material_damping
+        na = model.actuators.l0.size
+        self._lam_hist = np.zeros(na)       # λ_{n−1} at _t_prev, valid while state.t == _t_hist
+        self._lam_cand = np.zeros(na)       # λ_n of the step under way (history once it converges)
+        self._t_prev = 0.0
+        self._t_hist = math.nan
         self._rf = np.zeros(model.nsys)
         self._nf = model.nfree
         self._factored_coef: float | None = None   # tangent coefficient of the held factorization
@@ -82,7 +95,7 @@ class DynamicIntegrator:
         m, ws = self.model, self.ws
         update_load_scales(m, ws, state.t)
         apply_drives(m, state.q, state.t)
-        strain = assemble(m, ws, state.q, state.lam, False)
+        strain = assemble(m, ws, state.q, state.lam, False, v=state.v, lam_rate=state.lam_rate)
         state.a[:] = 0.0
         if self.spec.initial_acceleration == "consistent":
             csr_matvec(*m.mass_csr, state.v, self._ma)
@@ -104,16 +117,19 @@ class DynamicIntegrator:
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
 
     # -- one step ---------------------------------------------------------------------------
-    def step(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
+    def step(self, state: State, dt: float, lam_new: np.ndarray,
+             lam_rate: np.ndarray | None = None) -> StepResult:
         """Advance ``state`` by ``dt`` to the actuator stretches ``lam_new``.
 
-        On failure the step is retried in 2, 4, … sub-steps (policy ``substep``) with the
-        stretches interpolated linearly; ``state`` is left unchanged if nothing converges.
+        ``lam_rate``: dλ/dt at the end of the step (1/s), read by material damping only; default
+        the second-order backward difference of λ_{n−1}, λ_n, λ_{n+1}. On failure the step is
+        retried in 2, 4, … sub-steps (policy ``substep``) with the stretches interpolated linearly
+        (and backward differences); ``state`` is left unchanged if nothing converges.
         """
         if self._backup is None:
             self._backup = state.copy()
         self._backup.assign(state)
-        res = self._newton(state, dt, lam_new)
+        res = self._newton(state, dt, lam_new, lam_rate)
         if res.converged or self.spec.on_unconverged != "substep":
             if not res.converged and self.spec.on_unconverged == "stop":
                 state.assign(self._backup)
@@ -121,7 +137,8 @@ class DynamicIntegrator:
         return retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, dt / n, lam_k), state,
                                self._backup, lam_new, self.spec.max_substep_levels, "sub-steps")
 
-    def _newton(self, state: State, dt: float, lam_new: np.ndarray) -> StepResult:
+    def _newton(self, state: State, dt: float, lam_new: np.ndarray,
+                lam_rate: np.ndarray | None = None) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec
         am, af, beta, gamma = self.am, self.af, self.beta, self.gamma
         c_tilde = 1.0 / (beta * dt * dt)
@@ -139,6 +156,15 @@ class DynamicIntegrator:
         q_hat += q_n
         q_hat += dt * v_n
         t_new = state.t + dt
+        damped = self._damped
+        t_n = state.t
+        if damped:
+            if lam_rate is None:
+                h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
+                stretch_rate(lam_new, state.lam, self._lam_hist, dt, h0, state.lam_rate)
+            else:
+                state.lam_rate[:] = lam_rate
+            self._lam_cand[:] = state.lam
         state.lam[:] = lam_new
         ch = spec.integrator == "chung_hulbert"
         if ch and m.n_multipliers:
@@ -171,7 +197,12 @@ class DynamicIntegrator:
             if ch:
                 np.multiply(q, 1.0 - af, out=q_eval)
                 q_eval += af * q_n
-            strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult)
+            if damped:
+                velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, af if ch else 0.0, self._v_eval)
+                strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult, v=self._v_eval,
+                                  lam_rate=state.lam_rate, c_v=c_v)
+            else:
+                strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult)
             nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am_r, af_r, gamma, dt, c_m,
                                         mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf)
             rel = nr / ref
@@ -218,6 +249,9 @@ class DynamicIntegrator:
             self._factored_coef = None   # a failed step never leaves a stale tangent behind
             return StepResult(False, it, rel, inc, 1, message=message)
         self._tangent_age += 1
+        if damped:
+            self._lam_hist[:] = self._lam_cand
+            self._t_prev, self._t_hist = t_n, t_new
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
         kin, grav = energies(m, state)

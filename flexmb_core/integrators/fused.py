@@ -62,3 +62,28 @@ def update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, a, v, ati
         atil[i] = at
         a[i] = ((1.0 - am) * at + am * at_n[i] - af * a_n[i]) / (1.0 - af)
         v[i] = v_n[i] + dt * ((1.0 - gamma) * at_n[i] + gamma * at)
+
+
+@njit(cache=True)
+def velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, af, out):
+    """Rates of the iterate, v(q) = v_n + Δt[(1−γ) ã_n + γ ã(q)], blended as (1−αf) v + αf v_n
+    (``af`` = 0 except for the Chung–Hulbert form, which evaluates forces at t_{n+1−αf})."""
+    for i in range(q.size):
+        v = v_n[i] + dt * ((1.0 - gamma) * at_n[i] + gamma * (q[i] - q_hat[i]) * c_tilde)
+        out[i] = (1.0 - af) * v + af * v_n[i]
+
+
+@njit(cache=True)
+def stretch_rate(lam_new, lam_n, lam_prev, h1, h0, out):
+    """Actuator stretch rate at t_{n+1} from the last three stretches: second-order backward
+    difference on the variable grid (h1 = t_{n+1} − t_n, h0 = t_n − t_{n−1}); h0 ≤ 0 (no history)
+    falls back to the first-order (λ_{n+1} − λ_n)/h1."""
+    if h0 > 0.0:
+        c0 = (2.0 * h1 + h0) / (h1 * (h1 + h0))
+        c1 = -(h1 + h0) / (h1 * h0)
+        c2 = h1 / (h0 * (h1 + h0))
+        for i in range(out.size):
+            out[i] = c0 * lam_new[i] + c1 * lam_n[i] + c2 * lam_prev[i]
+    else:
+        for i in range(out.size):
+            out[i] = (lam_new[i] - lam_n[i]) / h1

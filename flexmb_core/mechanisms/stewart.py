@@ -14,14 +14,17 @@ Conventions (derived from the paper, see ``appendix_vertex_displacements_literal
   ``R_x(β) = [[1, 0, 0], [0, cβ, -sβ], [0, sβ, cβ]]``. With these, Eqs. 55 and 57 (all terms) and
   Eq. 56 (β terms and the x γ-term) are exactly ``R X_rel - X_rel``.
 * The platform orientation is ``R = R_z(γ) R_x(β)``; only one angle is non-zero at a time, so the
-  order does not matter for the appendix law.
+  order does not matter for the appendix law (inside a blended switch both are, and this order is
+  the definition).
 * Eq. 56's y γ-term reads ``+ℓ/2 sin γ``; the rigid rotation of ``B_rel = (-ℓ/2, -h/3, 0)`` gives
   ``-ℓ/2 sin γ``. The paper's Eq. 56 would stretch the platform edges, so the rigid rotation is
   used everywhere (SPEC §6.1); the literal equations are kept only for comparison.
 * Piecewise laws switch at t = 10 s (ψ = 2π, γ → β). Values are continuous there; velocities are
   not (the radius rate drops by R_max/10 = 0.03 m/s and the angular velocity jumps from
-  -π²/40 about z to +π²/60 about x). At exactly t = 10 s the rates of the first branch are returned.
-* The law is defined for 0 ≤ t ≤ 20 s (Eq. 54); times outside that interval are rejected.
+  -π²/40 about z to +π²/60 about x; leg rates jump by up to 0.13 m/s). At exactly t = 10 s the
+  rates of the first branch are returned.
+* The law is defined for 0 ≤ t ≤ 20 s (Eq. 54); times outside that interval are rejected. It ends
+  in motion (the command program holds the final lengths after 20 s, a rate jump outside the law).
 
 Start-up
 --------
@@ -33,12 +36,35 @@ The exact law starts with non-zero velocity from a platform at rest:
 ``b(τ) = 10τ³ - 15τ⁴ + 6τ⁵``, ``τ = t / blend_time``, so legs start at rest with zero acceleration
 and the command equals the exact law for ``t ≥ blend_time``.
 
+Branch switch
+-------------
+``switch_blend = T > 0`` replaces the switch by a C² (or smoother) blend of the two branches over
+``[10 − T/2, 10 + T/2]``: with the ramp ``s(t) = b((t − 10 + T/2)/T)``, the spiral radius is
+``(1 − s) R₁(ψ) + s R_max``, and the angles ``γ = (1 − s) γ₁(t)``, ``β = s β₂(t)`` (each branch
+continued analytically through the window; both rotations act inside it, ``R = R_z(γ) R_x(β)``).
+Pose, velocity and acceleration are continuous, the law is unchanged outside the window, and the
+blend departs from the exact law by at most 2.2 mm in leg length and 0.53 mm in centroid position
+(T = 0.5 s, quintic; both ∝ T), with leg accelerations up to 0.97 m/s² (∝ 1/T). With the quintic
+the jerk still jumps at the window ends.
+
+Blend continuity
+----------------
+``blend_continuity = k`` (2, 3, 4) selects the ramp of both blends: b' ∝ τ^k (1 − τ)^k (k = 2 is
+the quintic above, 4 the nonic ``126τ⁵ − 420τ⁶ + 540τ⁷ − 315τ⁸ + 70τ⁹``). A blend of class C^k
+has its first jump in the (k+1)-th derivative, which rings a structural mode of circular frequency ω
+with an amplitude ∝ jump/ω^(k+1): for the Stewart legs (first modes 107–135 Hz) the quintic's
+jerk jumps ring at ~1e-8 m (measured), the nonic's at ~1e-11 m (estimated), below the time error
+of any Δt ≤ 4 ms (docs/benchmarks/stewart.md).
+
 Leg-length range over 0-20 s (default geometry, L0 = 1.0513 m, sampled every 1 ms)
 ---------------------------------------------------------------------------------
 * exact law:   min 0.72163 m (leg 5, t ≈ 13.9 s), max 1.54214 m (leg 2, t ≈ 16.2 s), i.e.
   ΔL from -0.32967 m to +0.49084 m (stroke 0.82 m); max |L̇| = 0.3152 m/s.
 * blended law (blend_time = 1 s): same length extremes (they occur after t = 1 s);
   max |L̇| = 0.3492 m/s, reached during the ramp, which compresses the start into 1 s.
+* the shipped scenes' law (blended start 1 s, ``switch_blend`` 0.5 s, ``blend_continuity`` 4): same
+  extremes; max |L̇| = 0.4060 m/s (t ≈ 0.58 s), max |L̈| = 1.47 m/s² (t ≈ 0.39 s), 1.27 m/s² in the
+  switch window.
 """
 
 from __future__ import annotations
@@ -67,6 +93,8 @@ __all__ = [
     "appendix_vertex_displacements_literal",
     "appendix_vertex_positions",
     "blend_quintic",
+    "smoothstep",
+    "switch_weight",
     "default_leg_names",
     "read_command_table",
     "rotation_x",
@@ -274,6 +302,30 @@ def blend_quintic(t: ArrayLike, blend_time: float) -> tuple[FloatArray, FloatArr
     return b, b_dot
 
 
+def smoothstep(t: ArrayLike, duration: float, continuity: int = 2) -> tuple[FloatArray, FloatArray]:
+    """C^k ramp from 0 to 1 over [0, duration]: b' ∝ τ^k (1 − τ)^k, so b' … b^(k) vanish at both
+    ends (k = 2: the quintic of :func:`blend_quintic`; 3: septic; 4: nonic), τ = clip(t/duration).
+
+    Returns b (n,) [-] and its time derivative (n,) [1/s]. A motion blended with a C^k ramp has its
+    first jump in the (k+1)-th derivative: a structural mode ω is excited ∝ ω^−(k+1).
+    """
+    if not (math.isfinite(duration) and duration > 0.0):
+        raise ValueError(f"blend duration must be a positive duration in s, got {duration!r}")
+    if continuity not in (2, 3, 4):
+        raise ValueError(f"blend continuity must be 2, 3 or 4, got {continuity!r}")
+    k = continuity
+    tau = np.clip(np.asarray(t, dtype=np.float64) / duration, 0.0, 1.0)
+    c = math.factorial(2 * k + 1) / math.factorial(k) ** 2
+    # b(τ) = c ∫₀^τ u^k (1 − u)^k du = c Σ_j (−1)^j C(k, j) τ^(k+j+1) / (k+j+1)
+    b = np.zeros_like(tau)
+    for j in range(k + 1):
+        b += (-1) ** j * math.comb(k, j) * tau ** (k + j + 1) / (k + j + 1)
+    b *= c
+    b[tau >= 1.0] = 1.0             # exactly the end value (the sum leaves ~1e-15)
+    b_dot = c * tau**k * (1.0 - tau) ** k / duration
+    return b, b_dot
+
+
 # ----------------------------------------------------------------------------------------------
 # The appendix law (Eqs. 52-54, 58-59) and its exact time derivative
 # ----------------------------------------------------------------------------------------------
@@ -304,14 +356,33 @@ def _as_time(t: ArrayLike) -> FloatArray:
     return np.clip(arr, 0.0, T_END)
 
 
-def _centroid_law(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _check_switch_blend(switch_blend: float) -> None:
+    if not (math.isfinite(switch_blend) and 0.0 <= switch_blend <= 2.0 * (T_END - T_SWITCH)):
+        raise ValueError(f"switch_blend must be a duration in [0, {2.0 * (T_END - T_SWITCH):g}] s "
+                         f"(0: exact switch), got {switch_blend!r}")
+
+
+def switch_weight(t: ArrayLike, switch_blend: float, continuity: int = 2) -> tuple[FloatArray, FloatArray]:
+    """Weight s(t) of the second branch and its rate: the C^k ramp (:func:`smoothstep`, k =
+    ``continuity``) over [10 − T/2, 10 + T/2] for ``switch_blend = T > 0``; the step at t = 10 s
+    (first branch at t = 10 s) for T = 0."""
+    _check_switch_blend(switch_blend)
+    tt = np.asarray(t, dtype=np.float64)
+    if switch_blend == 0.0:
+        return (tt > T_SWITCH).astype(np.float64), np.zeros_like(tt)
+    return smoothstep(tt - (T_SWITCH - 0.5 * switch_blend), switch_blend, continuity)
+
+
+def _centroid_law(t: FloatArray, switch_blend: float = 0.0, continuity: int = 2) -> tuple[FloatArray, FloatArray]:
     """Eqs. 52-54: centroid displacement d_G (n, 3) [m] and its rate (n, 3) [m/s]."""
     psi_dot = math.pi / 5.0
     psi = psi_dot * t
     # Eq. 53 branch ψ ≤ 2π ⇔ t ≤ T_SWITCH; tested on t so both laws switch at the same sample.
-    first = t <= T_SWITCH
-    radius = np.where(first, R_MAX * psi / (2.0 * math.pi), R_MAX)
-    radius_dot = np.where(first, R_MAX * psi_dot / (2.0 * math.pi), 0.0)
+    w, w_dot = switch_weight(t, switch_blend, continuity)
+    r1 = R_MAX * psi / (2.0 * math.pi)
+    r1_dot = R_MAX * psi_dot / (2.0 * math.pi)
+    radius = (1.0 - w) * r1 + w * R_MAX
+    radius_dot = (1.0 - w) * r1_dot + w_dot * (R_MAX - r1)
     s, c = np.sin(psi), np.cos(psi)
     omega_z = 2.0 * math.pi / 5.0
     d = np.column_stack([-radius * s, radius * c, 0.5 * H0 * np.sin(omega_z * t)])
@@ -325,27 +396,36 @@ def _centroid_law(t: FloatArray) -> tuple[FloatArray, FloatArray]:
     return d, d_dot
 
 
-def _angle_law(t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+def _angle_law(t: FloatArray, switch_blend: float = 0.0,
+               continuity: int = 2) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Eqs. 58-59: γ, γ̇ (about z, 0-10 s) and β, β̇ (about x, 10-20 s) [rad, rad/s]."""
     w = math.pi / 10.0
-    first = t <= T_SWITCH
+    sw, sw_dot = switch_weight(t, switch_blend, continuity)
     s, c = np.sin(w * t), np.cos(w * t)
-    gamma = np.where(first, math.pi / 4.0 * s, 0.0)
-    gamma_dot = np.where(first, math.pi / 4.0 * w * c, 0.0)
-    beta = np.where(first, 0.0, -math.pi / 6.0 * s)
-    beta_dot = np.where(first, 0.0, -math.pi / 6.0 * w * c)
+    g1, g1_dot = math.pi / 4.0 * s, math.pi / 4.0 * w * c
+    b2, b2_dot = -math.pi / 6.0 * s, -math.pi / 6.0 * w * c
+    gamma = (1.0 - sw) * g1
+    gamma_dot = (1.0 - sw) * g1_dot - sw_dot * g1
+    beta = sw * b2
+    beta_dot = sw * b2_dot + sw_dot * b2
     return gamma, gamma_dot, beta, beta_dot
 
 
-def _commanded_motion(t: FloatArray, start: StartMode, blend_time: float) -> _Motion:
-    """Exact law, or the law with d_G, γ, β scaled by the C² ramp b(t) (product rule for rates)."""
-    d, d_dot = _centroid_law(t)
-    gamma, gamma_dot, beta, beta_dot = _angle_law(t)
+def _commanded_motion(t: FloatArray, start: StartMode, blend_time: float, switch_blend: float = 0.0,
+                      continuity: int = 2) -> _Motion:
+    """Exact law, or the law with d_G, γ, β scaled by the C^k ramp b(t) (product rule for rates);
+    ``switch_blend`` > 0 blends the t = 10 s branch switch (see the module docstring); both blends
+    are C^k, k = ``continuity``."""
+    if continuity not in (2, 3, 4):
+        raise ValueError(f"blend_continuity must be 2, 3 or 4, got {continuity!r}")
+    d, d_dot = _centroid_law(t, switch_blend, continuity)
+    gamma, gamma_dot, beta, beta_dot = _angle_law(t, switch_blend, continuity)
     if start == "exact":
         return _Motion(d, d_dot, gamma, gamma_dot, beta, beta_dot)
     if start != "blended":
         raise ValueError(f"start must be 'exact' or 'blended', got {start!r}")
-    b, b_dot = blend_quintic(t, blend_time)
+    b, b_dot = (blend_quintic(t, blend_time) if continuity == 2
+                else smoothstep(t, blend_time, continuity))
     return _Motion(
         d * b[:, None],
         d_dot * b[:, None] + d * b_dot[:, None],
@@ -373,6 +453,8 @@ def appendix_pose(
     *,
     start: StartMode = "exact",
     blend_time: float = 1.0,
+    switch_blend: float = 0.0,
+    blend_continuity: int = 2,
 ) -> tuple[FloatArray, FloatArray]:
     """Commanded platform pose: centroid position and rotation matrix (Eqs. 52-54, 58-59).
 
@@ -386,6 +468,11 @@ def appendix_pose(
         ``"blended"`` ramps the motion in over ``blend_time`` (see ``blend_quintic``).
     blend_time : float
         Ramp duration for ``start="blended"`` [s].
+    switch_blend : float
+        Duration T of the blend of the t = 10 s branch switch over [10 − T/2, 10 + T/2] [s];
+        0 (default) keeps the exact switch.
+    blend_continuity : {2, 3, 4}
+        Continuity C^k of both blends (start and switch); 2 (default) is the quintic.
 
     Returns
     -------
@@ -395,7 +482,7 @@ def appendix_pose(
         Platform rotation R_z(γ) R_x(β) (maps body offsets to world) [-].
     """
     geometry = geometry or StewartGeometry.default()
-    m = _commanded_motion(_as_time(t), start, blend_time)
+    m = _commanded_motion(_as_time(t), start, blend_time, switch_blend, blend_continuity)
     R, _ = _orientation(m)
     return geometry.centroid0() + m.d, R
 
@@ -406,6 +493,8 @@ def appendix_vertex_positions(
     *,
     start: StartMode = "exact",
     blend_time: float = 1.0,
+    switch_blend: float = 0.0,
+    blend_continuity: int = 2,
 ) -> tuple[FloatArray, FloatArray]:
     """Commanded positions and velocities of the vertices A, B, C under the rigid motion.
 
@@ -413,7 +502,7 @@ def appendix_vertex_positions(
 
     Parameters
     ----------
-    t, geometry, start, blend_time
+    t, geometry, start, blend_time, switch_blend, blend_continuity
         As in ``appendix_pose``.
 
     Returns
@@ -424,7 +513,7 @@ def appendix_vertex_positions(
         Vertex velocities, same axes [m/s].
     """
     geometry = geometry or StewartGeometry.default()
-    m = _commanded_motion(_as_time(t), start, blend_time)
+    m = _commanded_motion(_as_time(t), start, blend_time, switch_blend, blend_continuity)
     R, R_dot = _orientation(m)
     offsets = geometry.vertex_offsets()  # (3, 3) rows = vertices
     p = geometry.centroid0() + m.d[:, None, :] + np.einsum("nij,vj->nvi", R, offsets)
@@ -438,6 +527,8 @@ def appendix_vertex_displacements(
     *,
     start: StartMode = "exact",
     blend_time: float = 1.0,
+    switch_blend: float = 0.0,
+    blend_continuity: int = 2,
 ) -> FloatArray:
     """Rigid-motion vertex displacements d_X = d_G + (R − I) X_rel, shape (n, 3, 3) [m].
 
@@ -445,7 +536,8 @@ def appendix_vertex_displacements(
     difference in Eq. 56.
     """
     geometry = geometry or StewartGeometry.default()
-    p, _ = appendix_vertex_positions(t, geometry, start=start, blend_time=blend_time)
+    p, _ = appendix_vertex_positions(t, geometry, start=start, blend_time=blend_time,
+                                     switch_blend=switch_blend, blend_continuity=blend_continuity)
     return p - (geometry.centroid0() + geometry.vertex_offsets())
 
 
@@ -498,6 +590,8 @@ def appendix_leg_lengths(
     *,
     start: StartMode = "exact",
     blend_time: float = 1.0,
+    switch_blend: float = 0.0,
+    blend_continuity: int = 2,
 ) -> tuple[FloatArray, FloatArray]:
     """Commanded absolute leg lengths L_i(t) (Eq. 60) and their exact time derivatives.
 
@@ -517,6 +611,10 @@ def appendix_leg_lengths(
         t ≥ ``blend_time``.
     blend_time : float
         Ramp duration for ``start="blended"`` [s].
+    switch_blend : float
+        Duration of the blend of the t = 10 s branch switch [s]; 0: exact switch (rate jump).
+    blend_continuity : {2, 3, 4}
+        Continuity C^k of both blends (start and switch); 2 (default) is the quintic.
 
     Returns
     -------
@@ -527,7 +625,8 @@ def appendix_leg_lengths(
     """
     geometry = geometry or StewartGeometry.default()
     layout = geometry.layout()
-    p, v = appendix_vertex_positions(t, geometry, start=start, blend_time=blend_time)
+    p, v = appendix_vertex_positions(t, geometry, start=start, blend_time=blend_time,
+                                     switch_blend=switch_blend, blend_continuity=blend_continuity)
     r = p[:, layout.leg_vertex, :] - layout.base_points  # (n, 6, 3)
     lengths = np.linalg.norm(r, axis=2)  # (n, 6)
     rates = np.einsum("nlk,nlk->nl", r, v[:, layout.leg_vertex, :]) / lengths
@@ -540,6 +639,8 @@ def appendix_platform_outputs(
     *,
     start: StartMode = "exact",
     blend_time: float = 1.0,
+    switch_blend: float = 0.0,
+    blend_continuity: int = 2,
 ) -> tuple[FloatArray, FloatArray]:
     """Commanded centroid position and orientation quaternion, for pose-tracking comparisons.
 
@@ -548,7 +649,7 @@ def appendix_platform_outputs(
 
     Parameters
     ----------
-    t, geometry, start, blend_time
+    t, geometry, start, blend_time, switch_blend, blend_continuity
         As in ``appendix_pose``.
 
     Returns
@@ -559,7 +660,7 @@ def appendix_platform_outputs(
         Unit quaternion (w, x, y, z) [-].
     """
     geometry = geometry or StewartGeometry.default()
-    m = _commanded_motion(_as_time(t), start, blend_time)
+    m = _commanded_motion(_as_time(t), start, blend_time, switch_blend, blend_continuity)
     cg, sg = np.cos(0.5 * m.gamma), np.sin(0.5 * m.gamma)
     cb, sb = np.cos(0.5 * m.beta), np.sin(0.5 * m.beta)
     quat = np.column_stack([cg * cb, cg * sb, sg * sb, sg * cb])

@@ -61,25 +61,39 @@ def assemble_constraints(model: Model, ws: Workspace, q: np.ndarray, mult: np.nd
 
 
 def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool,
-             mult: np.ndarray | None = None) -> float:
+             mult: np.ndarray | None = None, *, v: np.ndarray | None = None,
+             lam_rate: np.ndarray | None = None, c_v: float = 0.0) -> float:
     """Internal forces minus configuration-dependent loads into ``ws.r`` (full), and the tangent
     of that into ``ws.kdata`` (system CSR: free DOFs, then multipliers) when ``want_k``. With rigid
     corners, ``mult`` adds the constraint forces Gᵀλ to ``ws.r`` and the violations go to ``ws.rc``.
     Returns the strain energy (J).
 
-    Moment loads use the scales last set by :func:`update_load_scales`.
+    Material (Kelvin–Voigt) damping reads the rates ``v (ndof,)`` and the actuator stretch rates
+    ``lam_rate (na,)`` (zero when not given: statics, modes); its viscous forces join ``ws.r`` and
+    ``∂r/∂q + c_v ∂r/∂v`` joins the tangent (``c_v = ∂v/∂q`` of the integrator, γ/(βΔt)). The
+    dissipated power goes to ``ws.dissipation``. Moment loads use the scales last set by
+    :func:`update_load_scales`.
     """
     ws.r[:] = 0.0
     if want_k:
         ws.kdata[:] = 0.0
+    v = ws.zero_v if v is None else v
+    lam_rate = ws.zero_lam_rate if lam_rate is None else lam_rate
+    c_v = float(c_v)
     energy = 0.0
+    diss = 0.0
     for g, sc in zip(model.frame_groups, ws.frame_scratch):
-        energy += frame_group(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, g.smap, want_k, False,
-                              ws.r, ws.kdata, *sc)
+        u, dp = frame_group(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, lam_rate, c_v, g.smap,
+                            want_k, False, ws.r, ws.kdata, *sc)
+        energy += u
+        diss += dp
     if model.truss is not None:
         t = model.truss
-        energy += truss_group(q, t.edofs, t.l0, t.ea, t.act, lam, t.smap, want_k, ws.r, ws.kdata,
-                              *ws.truss_scratch)
+        u, dp = truss_group(q, v, t.edofs, t.l0, t.ea, t.tau, t.act, lam, lam_rate, c_v, t.smap, want_k, ws.r,
+                            ws.kdata, *ws.truss_scratch)
+        energy += u
+        diss += dp
+    ws.dissipation = diss
     assemble_constraints(model, ws, q, ws.no_mult if mult is None else mult, want_k)
     m = model.moments
     if m.follower_vdofs.shape[0]:
@@ -91,14 +105,20 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
     return energy
 
 
-def actuator_dudlam(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """dU/dλ per actuator (J) into ``ws.dudlam``; the axial force is ``−dU/dλ / L0``."""
+def actuator_dudlam(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, *,
+                    v: np.ndarray | None = None, lam_rate: np.ndarray | None = None) -> np.ndarray:
+    """Generalized force conjugate to λ per actuator (J) into ``ws.dudlam``: ``∂U/∂λ``, plus the
+    viscous ``∂D/∂λ̇`` of damped actuators when the rates ``v`` and ``lam_rate`` are given. The
+    axial force is ``−dudlam / L0``."""
     ws.dudlam[:] = 0.0
+    v = ws.zero_v if v is None else v
+    lam_rate = ws.zero_lam_rate if lam_rate is None else lam_rate
     for g, sc in zip(model.frame_groups, ws.frame_scratch):
         if np.any(g.act >= 0):
-            frame_group_actuator_dudlam(q, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, False, True,
-                                        ws.dudlam, *sc)
+            frame_group_actuator_dudlam(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, lam_rate, 0.0,
+                                        False, True, ws.dudlam, *sc)
     if model.truss is not None and np.any(model.truss.act >= 0):
         t = model.truss
-        truss_group_actuator_dudlam(q, t.edofs, t.l0, t.ea, t.act, lam, False, ws.dudlam, *ws.truss_scratch)
+        truss_group_actuator_dudlam(q, v, t.edofs, t.l0, t.ea, t.tau, t.act, lam, lam_rate, 0.0, False, ws.dudlam,
+                                    *ws.truss_scratch)
     return ws.dudlam

@@ -234,7 +234,8 @@ def compile_scene(scene: Scene) -> Model:
             # bent into arcs converge with few elements; "full" (p + 2) is kept for comparison.
             n_axial = mem.order if mem.integration == "reduced" else mem.order + 2
             key = (mem.order, n_axial, sec.points.shape[0])
-            row = np.array([mat.E, mat.E, mat.G, mat.G, sec.torsion / sec.polar, sec.shear_factor])
+            row = np.array([mat.E, mat.E, mat.G, mat.G, sec.torsion / sec.polar, sec.shear_factor,
+                            mat.eta / mat.E])
             iscale = None
             if mem.mass is not None:
                 iscale = np.ones(3)
@@ -273,6 +274,7 @@ def compile_scene(scene: Scene) -> Model:
                 truss_build["edofs"].append(edofs)
                 truss_build["l0"].append(l0)
                 truss_build["ea"].append(ea)
+                truss_build["tau"].append(mat.eta / mat.E)
                 truss_build["act"].append(act)
                 truss_build["member"].append(mi_id)
                 me = rho_a * l0 / 6.0 * np.kron(np.array([[2.0, 1.0], [1.0, 2.0]]), np.eye(3))
@@ -374,8 +376,9 @@ def compile_scene(scene: Scene) -> Model:
                            np.asarray(truss_build["ea"], dtype=float),
                            np.asarray(truss_build["act"], dtype=np.int64),
                            np.ascontiguousarray([scatter_map(ed) for ed in edofs], dtype=np.int64),
-                           np.asarray(truss_build["member"], dtype=np.int64))
-        _freeze(truss.edofs, truss.l0, truss.ea, truss.act, truss.smap, truss.member)
+                           np.asarray(truss_build["member"], dtype=np.int64),
+                           np.asarray(truss_build["tau"], dtype=float))
+        _freeze(truss.edofs, truss.l0, truss.ea, truss.act, truss.smap, truss.member, truss.tau)
 
     # -- mass -------------------------------------------------------------------------------
     mr, mc, mv = np.concatenate(mass_rows), np.concatenate(mass_cols), np.concatenate(mass_vals)

@@ -14,7 +14,8 @@ class FrameGroup:
     """Frame (and frame-actuator) elements of one order and one section rule.
 
     Arrays: ``edofs (ne, 9n)`` int64; ``dax, dsec (ne, nip, 3n, 3)``; ``w (ne, nip)`` (m³);
-    ``mat (ne, 6)`` [E, E_t, G, G_t, κ_t, k_s]; ``act (ne,)`` actuator id or −1;
+    ``mat (ne, 7)`` [E, E_t, G, G_t, κ_t, k_s, τ] with τ = η/E the Kelvin–Voigt retardation time
+    (s, 0: undamped); ``act (ne,)`` actuator id or −1;
     ``smap (ne, (9n)²)`` CSR position per local entry (−1 where a DOF is prescribed);
     ``member (ne,)`` member id.
     """
@@ -37,7 +38,8 @@ class FrameGroup:
 
 @dataclass(frozen=True)
 class TrussGroup:
-    """2-node bars (trusses and bar actuators): ``edofs (ne, 6)``, ``l0, ea (ne,)``, ``act``, ``smap``."""
+    """2-node bars (trusses and bar actuators): ``edofs (ne, 6)``, ``l0, ea (ne,)``, ``act``, ``smap``,
+    ``tau (ne,)`` Kelvin–Voigt retardation time η/E (s, 0: undamped)."""
 
     edofs: np.ndarray
     l0: np.ndarray
@@ -45,6 +47,7 @@ class TrussGroup:
     act: np.ndarray
     smap: np.ndarray
     member: np.ndarray
+    tau: np.ndarray
 
     @property
     def n_elements(self) -> int:
@@ -158,6 +161,12 @@ class Model:
         return self.free.size
 
     @property
+    def material_damping(self) -> bool:
+        """True when some element has Kelvin–Voigt damping (a material with ``eta`` > 0)."""
+        return (any(bool(np.any(g.mat[:, 6] > 0.0)) for g in self.frame_groups)
+                or (self.truss is not None and bool(np.any(self.truss.tau > 0.0))))
+
+    @property
     def n_multipliers(self) -> int:
         """Lagrange multipliers (6 per rigid corner), numbered after the free DOFs."""
         return self.nsys - self.nfree
@@ -194,6 +203,7 @@ class Model:
                 "prescribed_dofs": self.ndof - self.nfree, "nodes": len(self.node_names),
                 "members": len(self.members), "elements": kinds, "actuators": list(self.actuators.names),
                 "tangent_nonzeros": self.nnz, "mass_kg": self.total_mass,
+                "material_damping": self.material_damping,
                 "rigid_corners": self.corner_dofs.shape[0], "multiplier_hinges": self.hinge_dofs.shape[0],
                 "frame_groups": [f"order {g.order}, {g.n_elements} el., {g.w.shape[1]} points/el."
                                  for g in self.frame_groups]}

@@ -16,7 +16,9 @@ class State:
 
     ``q, v, a (ndof,)``: positions/vectors, velocities, accelerations; ``atil (ndof,)`` the
     generalized-α pseudo-acceleration (equals ``a`` for Newmark); ``lam (na,)`` actuator
-    stretch L_cmd/L0.
+    stretch L_cmd/L0; ``lam_rate (na,)`` its rate dλ/dt (1/s), which material damping reads
+    (commanded extension moves the actuator's reference and is not damped); the dynamic
+    integrator keeps it for models with material damping, it stays zero otherwise.
     """
 
     t: float
@@ -26,6 +28,11 @@ class State:
     atil: np.ndarray
     lam: np.ndarray
     mult: np.ndarray        # (6·corners,) Lagrange multipliers of rigid corners (N·m)
+    lam_rate: np.ndarray | None = None   # (na,) 1/s; zeros when not given
+
+    def __post_init__(self) -> None:
+        if self.lam_rate is None:
+            self.lam_rate = np.zeros(self.lam.shape)
 
     @classmethod
     def at_rest(cls, model: Model, t: float = 0.0) -> "State":
@@ -35,7 +42,7 @@ class State:
 
     def copy(self) -> "State":
         return State(self.t, self.q.copy(), self.v.copy(), self.a.copy(), self.atil.copy(), self.lam.copy(),
-                     self.mult.copy())
+                     self.mult.copy(), self.lam_rate.copy())
 
     def assign(self, other: "State") -> None:
         """Copy ``other`` into this state's arrays (no allocation)."""
@@ -46,6 +53,7 @@ class State:
         self.atil[:] = other.atil
         self.lam[:] = other.lam
         self.mult[:] = other.mult
+        self.lam_rate[:] = other.lam_rate
 
 
 class Workspace:
@@ -57,7 +65,10 @@ class Workspace:
         self.kdata = np.zeros(model.nnz)
         self.f_ext = np.zeros(n)
         self.frame_scratch = [frame_scratch(g.w.shape[1], g.dax.shape[2]) for g in model.frame_groups]
-        self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros((6, 6)))
+        self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros(6), np.zeros((6, 6)))   # qe, ve, re, ke
+        self.zero_v = np.zeros(n)                   # rates of an undamped evaluation (statics, modes)
+        self.zero_lam_rate = np.zeros(model.actuators.l0.size)
+        self.dissipation = 0.0                      # material damping power of the last assembly (W)
         self.follower_scale = np.ones(model.moments.follower_vdofs.shape[0])
         self.cons_scale = np.ones(model.moments.cons_vdofs.shape[0])
         self.load_scale = np.ones(model.load_vectors.shape[0])

@@ -91,7 +91,11 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     pmasses = tuple(PointMass(k, n.mapping({"node", "mass"}, {"node", "mass"}).get("node").name_in(nodes, "node"),
                               n.get("mass").number(positive=True, unit="kg"))
                     for k, n in root.get("point_masses", {}).items())
-    damp = root.get("damping", {}).mapping({"mass_proportional"})
+    damp = root.get("damping", {})
+    if isinstance(damp.value, dict) and any(k in damp.value for k in ("eta", "strain_rate", "kelvin_voigt")):
+        raise damp.fail("material (Kelvin–Voigt) damping is a material property: give it as "
+                        "materials: {name: {eta: <Pa·s>}}; the damping block holds mass_proportional only")
+    damp = damp.mapping({"mass_proportional"})
     c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
     solver = _solver(root.get("solver", {}), overrides or {})
     outputs = tuple(_output(k, n, nodes, members) for k, n in root.get("outputs", {}).items())
@@ -123,7 +127,8 @@ def _joint(n: Node, nodes, members) -> Joint:
 
 
 def _commands(n: Node, members) -> CommandProgramSpec:
-    n.mapping({"program", "actuators", "start", "blend_time"}, {"program", "actuators"})
+    n.mapping({"program", "actuators", "start", "blend_time", "switch_blend", "blend_continuity"},
+              {"program", "actuators"})
     program = n.get("program").string(("stewart_appendix",))
     acts = []
     for a in n.get("actuators").list():
@@ -133,18 +138,31 @@ def _commands(n: Node, members) -> CommandProgramSpec:
         acts.append(name)
     if len(set(acts)) != len(acts):
         raise n.fail(f"actuators listed twice: {acts}", "actuators")
-    return CommandProgramSpec(program, tuple(acts), n.get("start", "blended").string(("exact", "blended")),
-                              n.get("blend_time", 1.0).number(positive=True, unit="s"))
+    start = n.get("start", "blended").string(("exact", "blended"))
+    blend_time = n.get("blend_time", 1.0).number(positive=True, unit="s")
+    switch_blend = n.get("switch_blend", 0.0).number(nonneg=True, unit="s")
+    if switch_blend > 10.0:
+        raise n.fail(f"the branch switch at t = 10 s is blended over [10 − T/2, 10 + T/2]; T must lie in "
+                     f"[0, 10] s (0: the exact law), got {switch_blend!r}", "switch_blend")
+    continuity = n.get("blend_continuity", 2).integer(lo=2, hi=4)
+    return CommandProgramSpec(program, tuple(acts), start, blend_time, switch_blend, continuity)
 
 
 # -- pieces -------------------------------------------------------------------------------
 def _material(name: str, n: Node) -> Material:
-    n.mapping({"E", "nu", "rho", "G"}, {"E", "rho"})
+    n.mapping({"E", "nu", "rho", "G", "eta"}, {"E", "rho"})
     E = n.get("E").number(positive=True, unit="Pa")
     nu = n.get("nu", 0.0).number(lo=-0.99, hi=0.4999)
     rho = n.get("rho").number(positive=True, unit="kg/m³")
     G = n.get("G").number(positive=True, unit="Pa") if n.has("G") else E / (2.0 * (1.0 + nu))
-    return Material(name, E, nu, rho, G)
+    eta = 0.0
+    if n.has("eta"):
+        v = n.get("eta").value
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise n.fail(f"expected the Kelvin–Voigt viscosity as a finite number ≥ 0 in Pa·s, got {v!r} "
+                         f"(η = 2ζE/ω gives the damping ratio ζ at the circular frequency ω; 0: undamped)", "eta")
+        eta = float(v)
+    return Material(name, E, nu, rho, G, eta)
 
 
 def _section(name: str, n: Node) -> SectionSpec:

@@ -34,11 +34,23 @@ class Signal:
 
 @dataclass(frozen=True)
 class Material:
+    """Elastic constants, density and the Kelvin–Voigt viscosity ``eta`` (Pa·s, 0: undamped).
+
+    Material damping: ``S = C : (E + τ Ė)`` with the retardation time ``τ = eta / E``; it damps
+    deformation only (never rigid motion), each linear mode with the ratio ``ζ = ω τ / 2``.
+    """
+
     name: str
     E: float
     nu: float
     rho: float
     G: float
+    eta: float = 0.0
+
+    @property
+    def retardation_time(self) -> float:
+        """τ = η / E (s)."""
+        return self.eta / self.E
 
 
 @dataclass(frozen=True)
@@ -178,6 +190,8 @@ class CommandProgramSpec:
     actuators: tuple[str, ...]
     start: str = "blended"           # exact | blended (C² start from rest)
     blend_time: float = 1.0          # s
+    switch_blend: float = 0.0        # s; blend of the t = 10 s branch switch over [10 − T/2, 10 + T/2]; 0: exact
+    blend_continuity: int = 2        # C^k of both blends: 2 quintic, 3 septic, 4 nonic
 
 
 @dataclass(frozen=True)

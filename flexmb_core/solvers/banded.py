@@ -814,6 +814,18 @@ class SkylineLU:
 
     # -- numerics -------------------------------------------------------------------------------
 
+    def _writable(self, a: np.ndarray) -> np.ndarray:
+        """``a``, or a copy of it when it is read-only (a model's constant mass matrix): numba
+        compiles a read-only array as another type, i.e. a second kernel signature. The copy of the
+        last read-only array is kept, so a constant matrix is copied once."""
+        if a.flags.writeable:
+            return a
+        cached = getattr(self, "_ro_copy", None)
+        if cached is None or cached[0] is not a:
+            cached = (a, a.copy())
+            self._ro_copy = cached
+        return cached[1]
+
     def factor(self, data, *, mass=None, coef: float = 0.0) -> None:
         """Factor ``A = data + coef * mass`` (CSR values on the fixed pattern).
 
@@ -831,13 +843,13 @@ class SkylineLU:
         SingularPivotError
             A pivot is not finite or ``|pivot| <= pivot_tol * max |diag(A)|``.
         """
-        data = np.ascontiguousarray(data, dtype=np.float64)
+        data = self._writable(np.ascontiguousarray(data, dtype=np.float64))
         if data.shape != (self.nnz,):
             raise ValueError(f"SkylineLU.factor: data must have shape ({self.nnz},), got {data.shape}")
         if mass is None:
             mass, coef = data, 0.0
         else:
-            mass = np.ascontiguousarray(mass, dtype=np.float64)
+            mass = self._writable(np.ascontiguousarray(mass, dtype=np.float64))
             if mass.shape != (self.nnz,):
                 raise ValueError(f"SkylineLU.factor: mass must have shape ({self.nnz},), got {mass.shape}")
         self._factored = False

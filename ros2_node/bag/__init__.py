@@ -1,1 +1,11 @@
-"""Recording, reading and replaying rosbag2-compatible MCAP (no rclpy needed)."""
+"""Recording, reading and replaying rosbag2-compatible MCAP (no rclpy needed).
+
+- :mod:`.recorder` — :class:`~.recorder.BagRecorder`: the twin's messages (dicts) → a bag
+- :mod:`.run_hook` — ``flexmb run SCENE --mcap OUT``
+- :mod:`.replay` — ``flexmb replay BAG``: lockstep re-run and per-field comparison (:mod:`.compare`,
+  tolerances in :mod:`.tolerances`)
+- :mod:`.reader` — truncation-tolerant reading and ``flexmb bag recover``; :mod:`.info` — ``flexmb bag info``
+- :mod:`.regenerate` — ``flexmb bag regenerate`` (``bags/manifest.yaml``)
+- :mod:`.writer`, :mod:`.rosbag2`, :mod:`.cdr`, :mod:`.schemas` — the file layout, ``metadata.yaml``,
+  the CDR encoder and the ``ros2msg`` schemas
+"""

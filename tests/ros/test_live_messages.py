@@ -5,7 +5,7 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("flexmb_msgs.msg")
 
-from conftest import ROOT  # noqa: E402
+from dds_harness import ROOT  # noqa: E402
 
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402

@@ -6,8 +6,6 @@ Skipped when rclpy or flexmb_msgs is not installed (`make setup` installs both).
 
 from __future__ import annotations
 
-import os
-import random
 import subprocess
 import sys
 import textwrap
@@ -80,17 +78,6 @@ def expected_lengths(k: int) -> list[float]:
 
 def expected_velocities(k: int) -> list[float]:
     return [-1.25e-3 * (i + 1) * k for i in range(len(NAMES))]
-
-
-@pytest.fixture
-def dds_env(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    """Environment shared by this process and the child: loopback discovery, random domain."""
-    domain = random.SystemRandom().randint(1, 200)
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
-    monkeypatch.setenv("PYTHONUNBUFFERED", "1")
-    return dict(os.environ)
 
 
 @pytest.mark.timeout(60)

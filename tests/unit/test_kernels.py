@@ -11,6 +11,13 @@ from flexmb_core.kernels.truss import truss_element
 from flexmb_core.model.assembly import assemble, update_load_scales
 
 
+def _frame(x, v, g, e, mat, lam, lam_rate, c_v, want_k, want_dlam, sc, re, ke):
+    """One frame element through the kernel, with the workspace scratch ``sc`` (re, ke given)."""
+    d_, fp, fd, ep, ed, bm, bd, gb, gd, _, _, _, _, kn = sc
+    return frame_element(x, v, g.dax[e], g.dsec[e], g.w[e], g.nsec, mat, lam, lam_rate, c_v, want_k, want_dlam,
+                         d_, fp, fd, ep, ed, bm, bd, gb, gd, re, ke, kn)
+
+
 def _mixed_scene():
     """Frames (orders 1–4, straight and curved), a frame actuator, a truss, a bar actuator and
     both kinds of moment loads: every kernel in one model."""
@@ -92,15 +99,14 @@ def test_frame_element_tangent_and_energy_gradient(order, curved):
     model, sim = build(d)
     g = model.frame_groups[0]
     sc = sim.ws.frame_scratch[0]
-    d_, fp, ep, bm, gb, _, re, ke = sc
+    re, ke = sc[11], sc[12]
     rng = np.random.default_rng(order)
     qe = model.q0[g.edofs[0]] + 0.05 * rng.standard_normal(g.edofs.shape[1])
     for lam in (1.0, 1.2):
         def ev(x):
             r = np.zeros_like(re)
             k = np.zeros_like(ke)
-            u, dl = frame_element(x, g.dax[0], g.dsec[0], g.w[0], g.nsec, g.mat[0], lam, True, True,
-                                  d_, fp, ep, bm, gb, r, k)
+            u, dl, _ = _frame(x, 0 * x, g, 0, g.mat[0], lam, 0.0, 0.0, True, True, sc, r, k)
             return u, dl, r, k
         u, dl, r, k = ev(qe)
         h = 1e-6
@@ -118,8 +124,8 @@ def test_frame_element_tangent_and_energy_gradient(order, curved):
         assert np.array_equal(k, k.T)
         # dU/dλ at fixed q against a central difference in λ
         def energy_at(l):
-            return frame_element(qe, g.dax[0], g.dsec[0], g.w[0], g.nsec, g.mat[0], l, False, False,
-                                 d_, fp, ep, bm, gb, np.zeros_like(re), np.zeros_like(ke))[0]
+            return _frame(qe, 0 * qe, g, 0, g.mat[0], l, 0.0, 0.0, False, False, sc, np.zeros_like(re),
+                          np.zeros_like(ke))[0]
         dfd = (energy_at(lam + 1e-6) - energy_at(lam - 1e-6)) / 2e-6
         assert dl == pytest.approx(dfd, rel=1e-6)
 
@@ -168,28 +174,34 @@ def test_actuators_stress_free_at_commanded_length(mixed):
         g_ids = [(gi, g) for gi, g in enumerate(model.frame_groups) if np.any(g.act == ia)]
         if g_ids:
             gi, g = g_ids[0]
-            d_, fp, ep, bm, gb, _, re, ke = ws.frame_scratch[gi]
+            sc = ws.frame_scratch[gi]
+            re, ke = sc[11], sc[12]
             for e in np.nonzero(g.act == ia)[0]:
-                u, _ = frame_element(q[g.edofs[e]], g.dax[e], g.dsec[e], g.w[e], g.nsec, g.mat[e], lam[ia],
-                                     False, False, d_, fp, ep, bm, gb, re, ke)
+                u, _, _ = _frame(q[g.edofs[e]], 0 * q[g.edofs[e]], g, e, g.mat[e], lam[ia], 0.0, 0.0, False,
+                                 False, sc, re, ke)
                 assert abs(u) < 1e-20
                 assert np.abs(re).max() < 1e-6
         else:
             t = model.truss
             for e in np.nonzero(t.act == ia)[0]:
                 re = np.zeros(6)
-                u, _ = truss_element(q[t.edofs[e]], t.l0[e], t.ea[e], lam[ia], False, re, np.zeros((6, 6)))
+                u, _, _ = truss_element(q[t.edofs[e]], np.zeros(6), t.l0[e], t.ea[e], 0.0, lam[ia], 0.0, 0.0,
+                                        False, re, np.zeros((6, 6)))
                 assert abs(u) < 1e-20
                 assert np.abs(re).max() < 1e-6
 
 
+def _truss(x, v, lam, want_k, re, ke, tau=0.0, lam_rate=0.0, c_v=0.0):
+    return truss_element(x, v, 1.1, 3.0e6, tau, lam, lam_rate, c_v, want_k, re, ke)
+
+
 def test_truss_tangent_and_actuator_derivative():
-    rng = np.random.default_rng(5)
     x = np.array([0.1, -0.2, 0.3, 1.2, 0.4, -0.1])
+    v0 = np.zeros(6)
     for lam in (1.0, 0.7, 1.4):
         re = np.zeros(6)
         ke = np.zeros((6, 6))
-        u, dl = truss_element(x, 1.1, 3.0e6, lam, True, re, ke)
+        u, dl, _ = _truss(x, v0, lam, True, re, ke)
         h = 1e-7
         kfd = np.zeros((6, 6))
         gfd = np.zeros(6)
@@ -197,18 +209,17 @@ def test_truss_tangent_and_actuator_derivative():
             e = np.zeros(6)
             e[j] = h
             rp, rm = np.zeros(6), np.zeros(6)
-            up, _ = truss_element(x + e, 1.1, 3.0e6, lam, False, rp, ke * 0)
-            um, _ = truss_element(x - e, 1.1, 3.0e6, lam, False, rm, ke * 0)
+            up, _, _ = _truss(x + e, v0, lam, False, rp, ke * 0)
+            um, _, _ = _truss(x - e, v0, lam, False, rm, ke * 0)
             kfd[:, j] = (rp - rm) / (2 * h)
             gfd[j] = (up - um) / (2 * h)
         re2 = np.zeros(6)
-        truss_element(x, 1.1, 3.0e6, lam, True, re2, ke)
+        _truss(x, v0, lam, True, re2, ke)
         assert np.allclose(re2, gfd, rtol=1e-6, atol=1e-6 * np.abs(re2).max())
         assert np.allclose(ke, kfd, rtol=1e-6, atol=1e-6 * np.abs(ke).max())
-        up, _ = truss_element(x, 1.1, 3.0e6, lam + 1e-7, False, re, ke)
-        um, _ = truss_element(x, 1.1, 3.0e6, lam - 1e-7, False, re, ke)
+        up, _, _ = _truss(x, v0, lam + 1e-7, False, re, ke)
+        um, _, _ = _truss(x, v0, lam - 1e-7, False, re, ke)
         assert dl == pytest.approx((up - um) / 2e-7, rel=1e-6)
-    del rng
 
 
 def test_strain_energy_is_frame_invariant(mixed):
@@ -226,4 +237,210 @@ def test_strain_energy_is_frame_invariant(mixed):
     u2 = assemble(model, ws, q2, lam, False)
     assert u2 == pytest.approx(u1, rel=1e-10)
     assert np.allclose(ws.r.reshape(-1, 3), r1.reshape(-1, 3) @ rot.T, atol=1e-8 * np.abs(r1).max())
+    update_load_scales(model, ws, 0.0)
+
+
+# -- Kelvin–Voigt material damping ------------------------------------------------------------------
+def _fd(f, x, h):
+    """Central difference of a vector- or scalar-valued f at x, columns per component of x."""
+    cols = []
+    for j in range(x.size):
+        e = np.zeros_like(x)
+        e[j] = h
+        cols.append((np.asarray(f(x + e)) - np.asarray(f(x - e))) / (2 * h))
+    return np.array(cols).T
+
+
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+@pytest.mark.parametrize("curved", [False, True])
+def test_damped_frame_element_derivatives(order, curved):
+    """With τ > 0: the viscous force is ∂D/∂v (D = half the dissipated power), the tangent is
+    ∂r/∂q + c_v ∂r/∂v, the force conjugate to λ is ∂U/∂λ + ∂D/∂λ̇, and the dissipation is ≥ 0."""
+    d = cantilever(elements=1, order=order, E=1e8, nu=0.3, arc_center=(0.0, 2.0, 0.0) if curved else None,
+                   tip=[np.sin(0.4) * 2.0, 2.0 - np.cos(0.4) * 2.0, 0.0] if curved else None)
+    model, sim = build(d)
+    g = model.frame_groups[0]
+    sc = sim.ws.frame_scratch[0]
+    nloc = g.edofs.shape[1]
+    rng = np.random.default_rng(10 + order)
+    qe = model.q0[g.edofs[0]] + 0.05 * rng.standard_normal(nloc)
+    ve = rng.standard_normal(nloc)
+    mat = g.mat[0].copy()
+    mat[6] = 0.03                       # τ (s): viscous stresses comparable with the elastic ones
+    mat.setflags(write=False)           # as the model's (frozen) arrays: the same compiled signature
+
+    def ev(x, v, lam, lrate, c_v=0.0, want_k=False):
+        r, k = np.zeros(nloc), np.zeros((nloc, nloc))
+        u, dl, p = _frame(x, v, g, 0, mat, lam, lrate, c_v, want_k, True, sc, r, k)
+        return u, dl, p, r, k
+
+    for lam, lrate in ((1.0, 0.0), (1.2, 0.7)):
+        u, dl, p, r, k0 = ev(qe, ve, lam, lrate, 0.0, True)
+        assert p > 0.0
+        _, _, p0, r_el, _ = ev(qe, 0 * ve, lam, 0.0)
+        assert p0 == 0.0
+        # viscous force = ∂D/∂v, D = p/2
+        gv = _fd(lambda v: ev(qe, v, lam, lrate)[2] / 2, ve, 1e-6)
+        assert np.abs((r - r_el) - gv).max() <= 1e-7 * np.abs(r - r_el).max()
+        # tangent at fixed v, and its c_v part = ∂r/∂v
+        kq = _fd(lambda x: ev(x, ve, lam, lrate)[3], qe, 1e-6)
+        assert np.abs(k0 - kq).max() <= 1e-7 * np.abs(k0).max()
+        k1 = ev(qe, ve, lam, lrate, 250.0, True)[4]
+        kv = _fd(lambda v: ev(qe, v, lam, lrate)[3], ve, 1e-6)
+        assert np.abs((k1 - k0) / 250.0 - kv).max() <= 1e-7 * np.abs(kv).max()
+        assert np.abs(k0 - k0.T).max() > 1e-9 * np.abs(k0).max()     # damping makes it non-symmetric
+        # conjugate force of λ: ∂U/∂λ (fixed q) + ∂D/∂λ̇ (fixed q, v)
+        du = (ev(qe, ve, lam + 1e-6, lrate)[0] - ev(qe, ve, lam - 1e-6, lrate)[0]) / 2e-6
+        dd = (ev(qe, ve, lam, lrate + 1e-6)[2] - ev(qe, ve, lam, lrate - 1e-6)[2]) / 4e-6
+        assert dl == pytest.approx(du + dd, rel=1e-6)
+
+
+def test_damped_truss_derivatives():
+    x = np.array([0.1, -0.2, 0.3, 1.2, 0.4, -0.1])
+    v = np.array([0.3, -1.1, 0.4, -0.2, 0.8, 0.5])
+    tau = 0.02
+    for lam, lrate in ((1.0, 0.0), (0.8, -0.4), (1.3, 0.9)):
+        def ev(x_, v_, lam_=lam, lr=lrate, c_v=0.0):
+            re, ke = np.zeros(6), np.zeros((6, 6))
+            u, dl, p = _truss(x_, v_, lam_, True, re, ke, tau, lr, c_v)
+            return u, dl, p, re, ke
+        u, dl, p, r, k0 = ev(x, v)
+        assert p > 0.0
+        r_el = ev(x, 0 * v, lr=0.0)[3]
+        assert np.allclose(r - r_el, _fd(lambda w: ev(x, w)[2] / 2, v, 1e-6), rtol=1e-6, atol=1e-8 * np.abs(r).max())
+        assert np.allclose(k0, _fd(lambda y: ev(y, v)[3], x, 1e-7), rtol=1e-6, atol=1e-7 * np.abs(k0).max())
+        k1 = ev(x, v, c_v=100.0)[4]
+        assert np.allclose((k1 - k0) / 100.0, _fd(lambda w: ev(x, w)[3], v, 1e-6), rtol=1e-6,
+                           atol=1e-7 * np.abs(k1 - k0).max() / 100.0)
+        du = (ev(x, v, lam + 1e-7)[0] - ev(x, v, lam - 1e-7)[0]) / 2e-7
+        dd = (ev(x, v, lr=lrate + 1e-6)[2] - ev(x, v, lr=lrate - 1e-6)[2]) / 4e-6
+        assert dl == pytest.approx(du + dd, rel=1e-6)
+
+
+@pytest.fixture(scope="module")
+def mixed_damped():
+    """The mixed model with both materials damped (τ = 0.02 s steel, 0.05 s soft)."""
+    import dataclasses
+
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.simulator import Simulator
+    model, _ = _mixed_scene()
+    scene = model.scene
+    mats = {k: dataclasses.replace(m, eta=m.E * (0.02 if k == "steel" else 0.05)) for k, m in scene.materials.items()}
+    model = compile_scene(dataclasses.replace(scene, materials=mats))
+    sim = Simulator(model)
+    update_load_scales(model, sim.ws, 0.0)
+    return model, sim
+
+
+def test_damped_global_tangent_matches_finite_difference(mixed_damped):
+    """The Newton matrix of a damped model: d r(q, v(q))/dq with v(q) = v̂ + c_v q (integrator
+    rates, c_v = γ/(βΔt)), actuators at λ ≠ 1 with λ̇ ≠ 0."""
+    import scipy.sparse as sp
+    model, sim = mixed_damped
+    assert model.material_damping
+    ws = sim.ws
+    lam, lam_rate = np.array([1.15, 0.9]), np.array([0.4, -0.7])
+    q = _perturbed(model, 0.03, seed=4)
+    v = np.random.default_rng(7).standard_normal(model.ndof)
+    c_v = 40.0
+    assemble(model, ws, q, lam, True, v=v, lam_rate=lam_rate, c_v=c_v)
+    k = sp.csr_matrix((ws.kdata.copy(), model.indices, model.indptr), shape=(model.nfree,) * 2).toarray()
+    free = model.free
+    h = 1e-7
+    kfd = np.zeros_like(k)
+    for j, dof in enumerate(free):
+        rs = []
+        for sgn in (1, -1):
+            qq, vv = q.copy(), v.copy()
+            qq[dof] += sgn * h
+            vv[dof] += sgn * c_v * h
+            assemble(model, ws, qq, lam, False, v=vv, lam_rate=lam_rate)
+            rs.append(ws.r[free].copy())
+        kfd[:, j] = (rs[0] - rs[1]) / (2 * h)
+    err = np.abs(k - kfd).max() / np.abs(k).max()
+    assert err < 1e-7, f"damped tangent differs from the finite difference by {err:.2e}"
+
+
+def _rigid_velocity(model, q, omega, u):
+    """v = ω × x + u at positions, ω × V at section vectors."""
+    pos = np.zeros(model.ndof, dtype=bool)
+    pos[model.node_ydofs.ravel()] = True
+    v3 = np.cross(omega, q.reshape(-1, 3))
+    v3[pos.reshape(-1, 3)[:, 0]] += u
+    return v3.ravel()
+
+
+def test_viscous_force_vanishes_under_rigid_velocity(mixed_damped):
+    """A deformed, stressed model moving rigidly (translation + rotation): zero viscous force and
+    zero dissipation, while a deforming velocity of the same size is damped."""
+    model, sim = mixed_damped
+    ws = sim.ws
+    ws.follower_scale[:] = 0.0
+    ws.cons_scale[:] = 0.0
+    lam = np.array([1.1, 0.93])
+    q = _perturbed(model, 0.03, seed=2)
+    assemble(model, ws, q, lam, False)
+    r_el = ws.r.copy()
+    v_rigid = _rigid_velocity(model, q, np.array([0.8, -1.3, 2.1]), np.array([1.5, -0.4, 0.9]))
+    assemble(model, ws, q, lam, False, v=v_rigid)
+    viscous = np.abs(ws.r - r_el).max()
+    assert ws.dissipation < 1e-9
+    v_def = np.random.default_rng(3).standard_normal(model.ndof) * np.abs(v_rigid).max()
+    assemble(model, ws, q, lam, False, v=v_def)
+    damped = np.abs(ws.r - r_el).max()
+    assert ws.dissipation > 0.0
+    assert viscous < 1e-10 * damped, f"rigid velocity gives viscous force {viscous:.2e} N (deforming: {damped:.2e} N)"
+    update_load_scales(model, ws, 0.0)
+
+
+def test_commanded_extension_is_not_damped(mixed_damped):
+    """Actuators stretched uniformly at the commanded rate (v = λ̇/λ · (x − x₀) along the axis,
+    λ̇ given): stress-free, so no viscous force either."""
+    model, sim = mixed_damped
+    ws = sim.ws
+    lam = np.array([1.25, 0.8])
+    lam_rate = np.array([0.6, -0.3])
+    for ia, name in enumerate(model.actuators.names):
+        info = model.member(name)
+        q = model.q0.copy()
+        v = np.zeros(model.ndof)
+        x0 = model.q0[info.ydofs[0]]
+        for k in range(info.ydofs.shape[0]):
+            rel = model.q0[info.ydofs[k]] - x0
+            q[info.ydofs[k]] = x0 + lam[ia] * rel
+            v[info.ydofs[k]] = lam_rate[ia] * rel
+        out = np.zeros(2)
+        from flexmb_core.model.assembly import actuator_dudlam
+        actuator_dudlam(model, ws, q, lam, v=v, lam_rate=lam_rate)
+        out[:] = ws.dudlam
+        assert abs(out[ia]) < 1e-6
+        # and a mismatched rate is damped: the conjugate force changes
+        actuator_dudlam(model, ws, q, lam, v=v, lam_rate=lam_rate * 1.5)
+        assert abs(ws.dudlam[ia]) > 1e-3
+
+
+def test_dissipation_is_non_negative_and_equals_viscous_power(mixed_damped):
+    """2D = v·f_visc + Σ_a (∂D/∂λ̇_a) λ̇_a ≥ 0 for arbitrary states (Euler's theorem for the
+    quadratic dissipation potential)."""
+    from flexmb_core.model.assembly import actuator_dudlam
+    model, sim = mixed_damped
+    ws = sim.ws
+    ws.follower_scale[:] = 0.0
+    ws.cons_scale[:] = 0.0
+    rng = np.random.default_rng(11)
+    for trial in range(20):
+        q = _perturbed(model, 0.05, seed=100 + trial)
+        lam = rng.uniform(0.8, 1.2, 2)
+        v = rng.standard_normal(model.ndof)
+        lam_rate = rng.standard_normal(2)
+        assemble(model, ws, q, lam, False)
+        r_el = ws.r.copy()
+        assemble(model, ws, q, lam, False, v=v, lam_rate=lam_rate)
+        p = ws.dissipation
+        assert p >= 0.0
+        f_visc = ws.r - r_el
+        g_el = actuator_dudlam(model, ws, q, lam).copy()
+        g_visc = actuator_dudlam(model, ws, q, lam, v=v, lam_rate=lam_rate) - g_el
+        assert v @ f_visc + g_visc @ lam_rate == pytest.approx(p, rel=1e-9)
     update_load_scales(model, ws, 0.0)

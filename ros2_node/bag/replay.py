@@ -1,0 +1,396 @@
+"""``flexmb replay BAG``: re-run a recording's commands through the twin and compare its outputs.
+
+The twin is rebuilt from the bag alone: the scene attached as ``scene.yaml`` (or ``--scene``),
+the solver settings of the ``flexmb`` metadata record (``solver``: the effective ``SolverSpec``,
+so ``--dt``/``--integrator`` given to the recorded run are honoured), the runner options
+(``runner_options``) and the node name. It then steps in lockstep with the recording
+(:mod:`ros2_node.twin`'s timing rule):
+
+1. before the step from ``t_n``, apply every recorded command (``~/commands``,
+   ``~/actuator_commands``, ``~/joint_trajectory``) logged at ≤ ``t_n`` (ns), in file order;
+2. step (an offline run's last step is shortened to land on its ``until``, as ``flexmb run`` does);
+3. compare every output recorded at the new time (same ns) with what the replay reports, field by
+   field (:mod:`ros2_node.bag.compare` lists the fields and the default tolerances).
+
+No ROS is needed. Exit codes of the verb: 0 every field within tolerance; 3 a field beyond its
+tolerance, a structural mismatch (names, sizes), a replay step that failed, or recorded outputs the
+replay never reached; 1 bad input (not a bag, no scene, unknown tolerance key, bad override).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from flexmb_core.errors import FlexmbError
+
+from .. import topics as T
+from .compare import Comparison, FieldStat
+from .reader import BagReader
+from .tolerances import RELATIVE, REPORT_UNITS, parse_tolerances
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_DEVIATION = 0, 1, 3
+_MAX_FAILED_STEPS = 10          # consecutive replay steps that do not advance before giving up
+
+_OUTPUT_TYPES = {"sensor_msgs/msg/JointState", "flexmb_msgs/msg/ActuatorState", "geometry_msgs/msg/PoseStamped",
+                 "tf2_msgs/msg/TFMessage", "visualization_msgs/msg/MarkerArray", "flexmb_msgs/msg/TwinStatus",
+                 "rosgraph_msgs/msg/Clock"}
+
+
+class ReplayError(FlexmbError):
+    """A bag that cannot be replayed as asked (bad input: exit code 1)."""
+
+
+def _parse_override(item: str) -> tuple[list[str], Any]:
+    from flexmb_core.scene.loader import parse_yaml
+
+    if "=" not in item:
+        raise ReplayError(f"--override {item!r}: expected KEY.PATH=VALUE, e.g. materials.steel.E=2.2e11")
+    key, raw = item.split("=", 1)
+    path = [p for p in key.strip().split(".") if p]
+    if not path:
+        raise ReplayError(f"--override {item!r}: empty key")
+    return path, parse_yaml(raw)
+
+
+def apply_overrides(data: dict, items: list[str] | None) -> dict:
+    """Set dotted keys of a scene mapping (``materials.steel.E=2.2e11``; list items by index).
+    Keys under ``solver.`` are returned separately (they win over the recorded solver settings).
+
+    Raises
+    ------
+    ReplayError
+        When a key's parent does not exist or an index is out of range.
+    """
+    solver: dict = {}
+    for item in items or ():
+        path, value = _parse_override(item)
+        if path[0] == "solver" and len(path) == 2:
+            solver[path[1]] = value
+            continue
+        node: Any = data
+        for depth, key in enumerate(path[:-1]):
+            node = _child(node, key, ".".join(path[:depth + 1]), item)
+        last = path[-1]
+        if isinstance(node, list):
+            node[_index(node, last, item)] = value
+        elif isinstance(node, dict):
+            node[last] = value
+        else:
+            raise ReplayError(f"--override {item!r}: {'.'.join(path[:-1])} is a value, not a mapping")
+    return solver
+
+
+def _index(node: list, key: str, item: str) -> int:
+    try:
+        i = int(key)
+    except ValueError:
+        raise ReplayError(f"--override {item!r}: {key!r} must be a list index") from None
+    if not -len(node) <= i < len(node):
+        raise ReplayError(f"--override {item!r}: index {i} out of range (list of {len(node)})")
+    return i
+
+
+def _child(node: Any, key: str, where: str, item: str) -> Any:
+    if isinstance(node, dict):
+        if key not in node:
+            raise ReplayError(f"--override {item!r}: the scene has no key {where!r} "
+                              f"(has {sorted(map(str, node))})")
+        return node[key]
+    if isinstance(node, list):
+        return node[_index(node, key, item)]
+    raise ReplayError(f"--override {item!r}: {where!r} is a value, not a mapping")
+
+
+@dataclass
+class Twin:
+    """A twin rebuilt from a bag."""
+
+    scene: Any
+    model: Any
+    options: Any
+    node_name: str
+    until: float | None            # offline runs: where the last step lands
+    scene_sha256: str
+    scene_source: str
+
+
+def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[str] | None = None) -> Twin:
+    """Scene, compiled model and runner options of a bag (see the module docstring).
+
+    Raises
+    ------
+    ReplayError
+        When the bag has no scene (and none is given) or its settings are unreadable.
+    flexmb_core.errors.SceneError
+        When the (modified) scene does not validate.
+    """
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.scene.loader import parse_yaml, scene_from_dict
+
+    from ..twin import RunnerOptions
+    from .recorder import scene_sha256
+
+    if scene_path is not None:
+        text, source = Path(scene_path).read_text(encoding="utf-8"), str(scene_path)
+    else:
+        text, source = reader.scene_text(), f"{reader.file}:scene.yaml"
+        if text is None:
+            raise ReplayError(f"{reader.path}: no scene.yaml attachment (not recorded by flexmb?); "
+                              "give the scene with --scene PATH")
+    data = parse_yaml(text)
+    if not isinstance(data, dict):
+        raise ReplayError(f"{source}: not a scene mapping")
+    user_solver = apply_overrides(data, overrides)
+    try:
+        solver = reader.setting("solver", {}, as_json=True)
+        opts = reader.setting("runner_options", {}, as_json=True)
+        until = reader.setting("until")
+    except json.JSONDecodeError as exc:
+        raise ReplayError(f"{reader.path}: unreadable settings in the 'flexmb' metadata ({exc})") from None
+    if not solver:                              # older bags / other writers: the scalar keys
+        solver = {k: json.loads(reader.setting(k)) if k == "dt" else reader.setting(k)
+                  for k in ("dt", "integrator") if reader.setting(k) is not None}
+    solver.update(user_solver)
+    scene = scene_from_dict(data, source=source, overrides=solver)
+    fields = {f.name for f in dataclasses.fields(RunnerOptions)}
+    unknown = sorted(set(opts) - fields)
+    if unknown:
+        raise ReplayError(f"{reader.path}: runner_options {unknown} unknown to this flexmb (has {sorted(fields)})")
+    options = RunnerOptions(**{k: (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
+                               for k, v in opts.items()})
+    return Twin(scene, compile_scene(scene), options, reader.setting("node_name") or T.DEFAULT_NODE_NAME,
+                float(until) if until is not None else None, scene_sha256(text), source)
+
+
+@dataclass
+class ReplayReport:
+    """What ``flexmb replay`` found (``exit_code`` per the module docstring)."""
+
+    bag: str
+    scene: str
+    scene_source: str
+    tolerances: dict
+    fields: list[FieldStat]
+    mismatches: list[str]
+    steps: int = 0
+    failed_steps: int = 0
+    commands_applied: int = 0
+    commands_rejected: int = 0
+    rejections: list[str] = field(default_factory=list)
+    samples_compared: int = 0
+    samples_unmatched: int = 0
+    first_unmatched_t: float | None = None
+    t_end: float = 0.0
+    truncated: bool = False
+    wall_time_s: float = 0.0
+    failure: str = ""
+
+    def beyond(self) -> list[FieldStat]:
+        return [f for f in self.fields if not f.ok(self.tolerances)]
+
+    @property
+    def ok(self) -> bool:
+        return (not self.beyond() and not self.mismatches and not self.failure and self.samples_unmatched == 0
+                and self.samples_compared > 0)
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_OK if self.ok else EXIT_DEVIATION
+
+    def as_dict(self) -> dict:
+        def fs(f: FieldStat) -> dict:
+            return {"topic": f.topic, "field": f.field, "kind": f.kind, "worst": f.worst, "t": f.t,
+                    "element": f.element, "peak": f.peak, "limit": f.limit(self.tolerances),
+                    "samples": f.samples, "identical": f.identical, "ok": f.ok(self.tolerances)}
+        d = {k: v for k, v in dataclasses.asdict(self).items() if k != "fields"}
+        d.update(fields=[fs(f) for f in self.fields], ok=self.ok, exit_code=self.exit_code)
+        return d
+
+    def format(self) -> str:
+        """A readable table: one line per topic/field with its worst deviation."""
+        tol = self.tolerances
+        lines = [f"replay of {self.bag} (scene '{self.scene}' from {self.scene_source}): {self.steps} steps to "
+                 f"t = {self.t_end:.6g} s, {self.commands_applied} commands applied"
+                 + (f" ({self.commands_rejected} rejected)" if self.commands_rejected else "")
+                 + f", {self.samples_compared} recorded messages compared in {self.wall_time_s:.2f} s"
+                 + (" — the bag ends early (read up to its last complete chunk)" if self.truncated else "")]
+        w = max([len(f.topic) for f in self.fields] + [5])
+        lines.append(f"  {'topic':{w}s}  {'field':24s} {'worst':>11s}  {'at t (s)':>10s}  {'where':22s} "
+                     f"{'limit':>10s}  {'unit':9s} result")
+        for f in self.fields:
+            flag = "ok" if f.ok(tol) else "BEYOND"
+            unit = REPORT_UNITS[f.kind]
+            note = f" ({tol[f.kind]:g} × peak {f.peak:.4g})" if f.kind in RELATIVE else ""
+            lines.append(f"  {f.topic:{w}s}  {f.field:24s} {f.worst:11.3e}  {f.t:10.4f}  {f.element[:22]:22s} "
+                         f"{f.limit(tol):10.3e}  {unit:9s} {flag:6s}{note}".rstrip())
+        for m in self.mismatches:
+            lines.append(f"  MISMATCH {m}")
+        if self.failure:
+            lines.append(f"  FAILED {self.failure}")
+        if self.samples_unmatched:
+            lines.append(f"  UNMATCHED {self.samples_unmatched} recorded output messages at times the replay never "
+                         f"reached (first at t = {self.first_unmatched_t:.9g} s)")
+        for r in self.rejections[:5]:
+            lines.append(f"  rejected command: {r}")
+        bad = self.beyond()
+        if self.ok:
+            exact = all(f.identical for f in self.fields)
+            lines.append("result: every field within tolerance (exit 0)"
+                         + ("; the replay is bit-identical to the recording" if exact else ""))
+        else:
+            why = []
+            if bad:
+                why.append(f"{len(bad)} field(s) beyond tolerance: "
+                           + ", ".join(f"{f.topic} {f.field} {f.worst:.3e} > {f.limit(tol):.3e} at t = {f.t:.4f} s"
+                                       + (f" ({f.element})" if f.element else "") for f in bad[:6]))
+            if self.mismatches:
+                why.append(f"{len(self.mismatches)} structural mismatch(es)")
+            if self.failure:
+                why.append("the replay failed")
+            if self.samples_unmatched:
+                why.append("recorded outputs not reproduced")
+            if self.samples_compared == 0:
+                why.append("nothing was compared")
+            lines.append("result: REGRESSION — " + "; ".join(why) + f" (exit {EXIT_DEVIATION})")
+        return "\n".join(lines)
+
+
+def _input_kinds(node_name: str) -> dict[str, str]:
+    return {T.COMMANDS.resolved(node_name): "commands", T.ACTUATOR_COMMANDS.resolved(node_name): "actuator_commands",
+            T.TRAJECTORY.resolved(node_name): "joint_trajectory"}
+
+
+def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str | None = None,
+           overrides: list[str] | None = None) -> ReplayReport:
+    """Replay ``bag`` and compare (see the module docstring).
+
+    Parameters
+    ----------
+    bag
+        A rosbag2 directory or ``.mcap`` recorded by ``flexmb run --mcap`` or ``flexmb node --mcap``.
+    tolerances
+        ``KEY=VALUE`` strings or a mapping (:mod:`ros2_node.bag.compare`); defaults otherwise.
+    scene_path
+        Replay against this scene file instead of the attached one.
+    overrides
+        ``KEY.PATH=VALUE`` edits of the scene (``materials.steel.E=2.2e11``, ``solver.tolerance=1e-6``).
+
+    Raises
+    ------
+    ReplayError, flexmb_core.errors.SceneError
+        On bad input.
+    """
+    from .tolerances import ToleranceError
+    from ..twin import TwinRunner, apply_message
+
+    try:
+        tol = (parse_tolerances(None, tolerances) if isinstance(tolerances, dict)
+               else parse_tolerances(tolerances))
+    except ToleranceError as exc:
+        raise ReplayError(str(exc)) from None
+    reader = BagReader(bag)
+    twin = load_twin(reader, scene_path, overrides)
+    runner = TwinRunner(twin.model, options=twin.options)
+    if runner.sim.spec.analysis != "dynamic":
+        raise ReplayError(f"{bag}: scene analysis '{runner.sim.spec.analysis}' cannot be replayed")
+    kinds = _input_kinds(twin.node_name)
+    pose_index = {T.pose_topic(o.name, i).resolved(twin.node_name): i
+                  for i, o in enumerate(o for o in twin.scene.outputs if o.kind == "platform_pose")}
+
+    commands: list[tuple[int, str, str, Any]] = []
+    outputs: dict[int, list[tuple[str, str, Any]]] = {}
+    for m in reader.messages():
+        if m.topic in kinds:
+            commands.append((m.log_time_ns, m.topic, kinds[m.topic], m.decode()))
+        elif m.type in _OUTPUT_TYPES:
+            outputs.setdefault(m.log_time_ns, []).append((m.topic, m.type, m))
+    if not outputs:
+        raise ReplayError(f"{bag}: no recorded outputs to compare (topics: {sorted(reader.topics())})")
+    commands.sort(key=lambda c: c[0])              # stable: file order within one time
+    last_ns = max(outputs)
+    cmp = Comparison()
+    report = ReplayReport(str(bag), twin.scene.name, twin.scene_source, tol, [], cmp.mismatches,
+                          truncated=reader.truncated)
+
+    def compare_at(ns: int) -> None:
+        batch = outputs.pop(ns, None)
+        if not batch:
+            return
+        s = runner.sample()
+        t = s.t
+        for topic, typ, m in batch:
+            rec = m.decode()
+            report.samples_compared += 1
+            if typ == "sensor_msgs/msg/JointState":
+                cmp.joint_states(topic, rec, s, t)
+            elif typ == "flexmb_msgs/msg/ActuatorState":
+                cmp.actuator_states(topic, rec, s, t)
+            elif typ == "geometry_msgs/msg/PoseStamped":
+                if topic in pose_index:
+                    cmp.pose(topic, rec, s, pose_index[topic], t)
+                else:
+                    cmp.mismatch(f"{topic}: no platform_pose output of the replayed scene publishes here "
+                                 f"(expected one of {sorted(pose_index)})")
+            elif typ == "tf2_msgs/msg/TFMessage":
+                cmp.tf(topic, rec, s, t)
+            elif typ == "visualization_msgs/msg/MarkerArray":
+                cmp.shape(topic, rec, s, t)
+            elif typ == "flexmb_msgs/msg/TwinStatus":
+                cmp.status(topic, rec, s, t)
+            elif typ == "rosgraph_msgs/msg/Clock":
+                c = rec.clock
+                if c.sec * 1_000_000_000 + c.nanosec != ns:
+                    cmp.mismatch(f"{topic}: clock {c.sec}.{c.nanosec:09d} logged at {ns} ns")
+
+    wall0 = time.perf_counter()
+    runner.start()
+    dt = runner.dt
+    until = twin.until
+    i, failed_in_a_row = 0, 0
+    compare_at(_ns(runner.t))
+    while True:
+        t = runner.t
+        t_ns = _ns(t)
+        while i < len(commands) and commands[i][0] <= t_ns:
+            _, topic, kind, msg = commands[i]
+            i += 1
+            r = apply_message(runner, kind, topic, msg)
+            report.commands_applied += 1
+            if r is not None:
+                report.commands_rejected += 1
+                if len(report.rejections) < 20:
+                    report.rejections.append(f"t = {t:.9g} s: {r}")
+        if t_ns >= last_ns or not outputs:
+            break
+        if until is not None:
+            if not t < until - 1e-12 * max(1.0, until):
+                break
+            runner.dt = min(dt, until - t)         # flexmb run shortens the last step the same way
+        outcome = runner.step()
+        runner.dt = dt
+        report.steps += 1
+        if not outcome.advanced:
+            report.failed_steps += 1
+            failed_in_a_row += 1
+            if failed_in_a_row >= _MAX_FAILED_STEPS:
+                report.failure = f"{failed_in_a_row} replay steps in a row failed at t = {t:.9g} s: {outcome.message}"
+                break
+            continue
+        failed_in_a_row = 0
+        compare_at(_ns(runner.t))
+    report.t_end = runner.t
+    report.wall_time_s = time.perf_counter() - wall0
+    if outputs:
+        report.samples_unmatched = sum(len(v) for v in outputs.values())
+        report.first_unmatched_t = min(outputs) * 1e-9
+    report.fields = sorted(cmp.stats.values(), key=lambda f: (f.topic, f.field))
+    return report
+
+
+def _ns(t: float) -> int:
+    return int(round(t * 1e9))

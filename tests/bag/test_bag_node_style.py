@@ -1,0 +1,110 @@
+"""A recording made the way the live node makes it — commands as received (named, stamped, and
+trajectories) logged at the twin's time, outputs at a publish rate, the node's settings — replays
+bit-identically, honouring the recorded runner options (command timeout and ramp to rest).
+No rclpy: the node's stepping is TwinRunner's, its messages are ros2_node.messages'."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexmb_core.model.compile import compile_scene
+from flexmb_core.scene import load_scene
+from ros2_node import messages as M
+from ros2_node import topics as T
+from ros2_node.bag.reader import BagReader
+from ros2_node.bag.recorder import BagRecorder
+from ros2_node.bag.replay import replay
+from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+
+from bag_helpers import ROOT, STEWART_BARS
+
+
+def _record_like_the_node(out, options: RunnerOptions) -> dict:
+    scene = load_scene(ROOT / STEWART_BARS)
+    model = compile_scene(scene)
+    runner = TwinRunner(model, options=options)
+    runner.start()
+    names = list(model.actuators.names)
+    rest = model.actuators.l0.copy()
+    n = "flexmb_twin"
+    settings = {"dt": runner.dt, "integrator": runner.sim.spec.integrator, "mode": "lockstep", "node_name": n,
+                "runner_options": vars(options), "source": "flexmb node"}
+    rec = BagRecorder(out, scene_path=str(ROOT / STEWART_BARS), scene_text=(ROOT / STEWART_BARS).read_text(),
+                      settings=settings)
+    kinds = runner.member_kinds
+    timing = M.StatusTiming()
+    sent = {"actuator_commands": 0, "joint_trajectory": 0}
+
+    def publish(s):
+        t = s.t
+        rec.write(T.JOINT_STATES.resolved(n), T.JOINT_STATES.type, M.joint_state(s), t)
+        rec.write(T.ACTUATOR_STATES.resolved(n), T.ACTUATOR_STATES.type, M.actuator_state(s), t)
+        rec.write(T.PLATFORM_POSE.resolved(n), T.PLATFORM_POSE.type, M.platform_pose(s), t)
+        rec.write(T.STATUS.resolved(n), T.STATUS.type, M.status(s, timing), t)
+        rec.write(T.SHAPE.resolved(n), T.SHAPE.type, M.shape(s, kinds), t)
+
+    publish(runner.sample())
+    for k in range(300):
+        t = runner.t
+        msg = None
+        if k < 100 and k % 3 == 0:                  # named, stamped commands with rates, 333 Hz
+            msg = ("actuator_commands", T.ACTUATOR_COMMANDS,
+                   M.actuator_command(t, names[:3], rest[:3] + 0.002 * np.sin(30 * t), [0.06 * np.cos(30 * t)] * 3))
+        elif k == 100:                              # one trajectory for the other legs
+            pts = [{"positions": list(rest[3:] + d), "velocities": [], "accelerations": [], "effort": [],
+                    "time_from_start": {"sec": 0, "nanosec": int(ns)}}
+                   for d, ns in ((0.001, 2e7), (0.003, 6e7), (0.0, 9e7))]
+            msg = ("joint_trajectory", T.TRAJECTORY,
+                   {"header": M.header(t), "joint_names": names[3:], "points": pts})
+        if msg is not None:                         # the node: record as received, then apply
+            kind, topic, d = msg
+            rec.write(topic.resolved(n), topic.type, d, runner.t)
+            assert apply_message(runner, kind, topic.resolved(n), d) is None
+            sent[kind] += 1
+        out_ = runner.step()
+        assert out_.advanced
+        if k % 2 == 1 or k == 299:                  # publish at 500 Hz and the last state
+            publish(runner.sample())
+    rec.close()
+    return sent
+
+
+def test_node_style_recording_replays_exactly_with_its_runner_options(tmp_path):
+    opts = RunnerOptions(command_timeout=0.05, timeout_behaviour="ramp_to_rest", ramp_time=0.05)
+    sent = _record_like_the_node(tmp_path / "node", opts)
+    assert sent == {"actuator_commands": 34, "joint_trajectory": 1}
+    r = BagReader(tmp_path / "node")
+    assert r.counts()[T.ACTUATOR_COMMANDS.resolved()] == 34
+    rep = replay(tmp_path / "node")
+    assert rep.ok, rep.format()
+    assert rep.commands_applied == 35 and rep.commands_rejected == 0 and rep.steps == 300
+    assert all(f.identical for f in rep.fields), rep.format()
+    # the timeout mattered: after the commands stop, the legs ramp back to rest
+    act = [m.decode() for m in r.messages({T.ACTUATOR_STATES.resolved()})]
+    late, early = np.array(act[-1].commanded_lengths), np.array(act[40].commanded_lengths)
+    rest = compile_scene(load_scene(ROOT / STEWART_BARS)).actuators.l0
+    assert np.abs(early - late).max() > 1e-4 and np.abs(late[:3] - rest[:3]).max() < 1e-6
+
+
+def test_replay_without_the_recorded_options_would_differ(tmp_path):
+    """The same bag replayed with the default options (hold, 0.5 s) must fail: the options count."""
+    import json
+
+    from ros2_node.bag.writer import BagWriter
+
+    _record_like_the_node(tmp_path / "node", RunnerOptions(command_timeout=0.05, timeout_behaviour="ramp_to_rest",
+                                                           ramp_time=0.05))
+    src = BagReader(tmp_path / "node")
+    out = BagWriter(tmp_path / "defaults")
+    for a in src.attachment_records:
+        out.add_attachment(a.name, bytes(a.data), a.media_type)
+    meta = src.settings()
+    meta["runner_options"] = json.dumps(vars(RunnerOptions()))
+    out.add_metadata("flexmb", meta)
+    chans = {cid: out.channel(ch.topic, src.schemas[ch.schema_id].name) for cid, ch in src.channels.items()}
+    for m in src.messages_raw:
+        out.write_cdr(chans[m.channel_id], bytes(m.data), m.log_time)
+    out.close()
+    rep = replay(tmp_path / "defaults")
+    assert not rep.ok and rep.exit_code == 3
+    assert any(f.field == "commanded_lengths" for f in rep.beyond())
