@@ -81,8 +81,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.mcap and (Path(args.mcap) / "metadata.yaml").exists():
         shutil.rmtree(args.mcap)           # the previous demo's recording (a rosbag2 directory)
     exe = [sys.executable, "-m", "ros2_node.cli"]
-    node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--duration", str(args.until),
-                      "--summary-json", str(node_json), "--quiet", "--idle-timeout", "10"]
+    # the node runs until the player is done (it may start stepping before the player is up)
+    node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--summary-json", str(node_json), "--quiet"]
     if args.publish_rate:
         node_cmd += ["--publish-rate", str(args.publish_rate)]
     if args.mcap:
@@ -104,6 +104,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         if player.poll() is None:
             player.send_signal(signal.SIGINT)
             player.wait(timeout=30)
+        if node.poll() is None:
+            node.send_signal(signal.SIGINT)    # the node closes its recording and writes its summary
         node.wait(timeout=120)
     except (subprocess.TimeoutExpired, KeyboardInterrupt):
         print("flexmb demo: interrupted or timed out", file=sys.stderr)

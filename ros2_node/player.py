@@ -5,6 +5,9 @@ law: ``flexmb play SCENE``) or a CSV table (``--csv``: ``t, L1..Ln[, rate1..rate
 interpolation). Forms: ``flexmb_msgs/ActuatorCommand`` (default: named, stamped with the time the
 lengths are meant for, with rates) or ``std_msgs/Float64MultiArray`` (``--topic commands``).
 
+The command law's time starts at the twin's time when playback begins (a realtime twin may have
+been holding its start lengths for a while): no jump from rest, whenever the player starts.
+
 Pacing. ``lockstep``: send the command for ``t + Δt``, wait for the twin's status that answers it,
 repeat (deterministic). ``realtime``: send at ``--rate`` Hz on the wall clock, for the twin's time
 estimated from its ``/clock`` (the twin owns time). Either way the player measures the end-to-end
@@ -114,6 +117,7 @@ class Player:
             self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.sim_time = None                  # twin's newest reported time (s)
+        self.t0 = 0.0                         # twin's time when playback began: the law's t = 0
         self.wall_at_sim_time = 0.0
         self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent
         self.latencies: list[float] = []
@@ -149,7 +153,9 @@ class Player:
         ref = self.source.reference_pose
         if ref is None:
             return
-        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec - self.t0
+        if t < 0.0:
+            return                           # before playback: the twin holds its start pose
         p_ref, q_ref = ref(t)
         p = msg.pose.position
         o = msg.pose.orientation
@@ -159,7 +165,8 @@ class Player:
 
     # -- sending ---------------------------------------------------------------------------------
     def _send(self, t_target: float) -> None:
-        lengths, rates = self.source.at(t_target)
+        # the command law starts at the twin's time when playback began (t0), from rest
+        lengths, rates = self.source.at(t_target - self.t0)
         ns = int(round(t_target * 1e9))
         if self.topic is T.COMMANDS:
             d = M.float64_array(lengths)
@@ -184,6 +191,7 @@ class Player:
 
     def run(self) -> dict:
         self._wait_for_twin()
+        self.t0 = self.sim_time
         t_start = time.perf_counter()
         if self.mode == "lockstep":
             self._run_lockstep()
@@ -197,7 +205,7 @@ class Player:
 
     def _run_lockstep(self) -> None:
         t = self.sim_time
-        n = int(round((self.until - t) / self.dt))
+        n = int(round(self.until / self.dt))
         for k in range(1, n + 1):
             target = t + k * self.dt
             ns = int(round(target * 1e9))
@@ -224,7 +232,7 @@ class Player:
         while self.context.ok():
             now = time.perf_counter()
             t_twin = self.sim_time + (now - self.wall_at_sim_time)
-            if t_twin >= self.until:
+            if t_twin - self.t0 >= self.until:
                 break
             # the estimate may step back when a /clock arrives late: stamps must never decrease
             target = max(t_twin + self.dt, last + 1e-6)
@@ -240,7 +248,7 @@ class Player:
 
     def summary(self, wall: float) -> dict:
         lat = np.array(self.latencies) if self.latencies else np.zeros(0)
-        out = {"mode": self.mode, "topic": self.topic.name, "wall_time_s": wall, "statuses": self.statuses,
+        out = {"mode": self.mode, "topic": self.topic.name, "wall_time_s": wall, "t0_s": self.t0, "statuses": self.statuses,
                "unconverged_reported": self.unconverged, "commands_unanswered": len(self.sent),
                "latency_s": {"p50": float(np.percentile(lat, 50)) if lat.size else None,
                              "p99": float(np.percentile(lat, 99)) if lat.size else None,
