@@ -25,7 +25,7 @@ MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.ms
 
 # The Stewart twin end to end: the node and the command player as two processes on DDS (real
 # time, Δt = 1 ms, the 20 s appendix trajectory), recorded to MCAP, then shown in rerun (an .rrd).
-DEMO_SCENE ?= scenes/stewart_platform_realtime.yaml
+DEMO_SCENE ?= scenes/stewart_platform_bars.yaml
 DEMO_CMD ?= $(VENV)/bin/flexmb demo $(DEMO_SCENE) --mcap build/demo/bag --out build/demo \
 	&& $(VENV)/bin/flexmb view build/demo/bag --rrd build/demo/stewart.rrd
 PYTEST_ARGS ?=

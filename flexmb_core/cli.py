@@ -153,7 +153,9 @@ def cmd_commands(args: argparse.Namespace) -> int:
 
     n = int(round(args.until / args.dt)) + 1
     t = np.linspace(0.0, args.until, n)
-    lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time)
+    lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time,
+                                                  switch_blend=args.switch_blend,
+                                                  blend_continuity=args.blend_continuity)
     stewart.write_command_table(args.out, t, lengths, rates)
     print(f"wrote {n} rows × 6 legs ({args.start} start) to {args.out}")
     return 0
@@ -186,6 +188,10 @@ def build_parser() -> argparse.ArgumentParser:
     cm.add_argument("--start", choices=("exact", "blended"), default="blended",
                     help="exact appendix law (non-zero initial velocity) or C²-blended start")
     cm.add_argument("--blend-time", type=float, default=1.0, help="blend duration (s)")
+    cm.add_argument("--switch-blend", type=float, default=0.0,
+                    help="blend of the t = 10 s branch switch (s); 0: the exact law's rate jump")
+    cm.add_argument("--blend-continuity", type=int, choices=(2, 3, 4), default=2,
+                    help="continuity of the blends: C² (quintic), C³, C⁴ (nonic)")
     cm.set_defaults(func=cmd_commands)
     # Where the application layer (ros2_node.cli) adds its verbs and its options to `run`.
     p.verbs = sub

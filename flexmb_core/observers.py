@@ -22,8 +22,9 @@ def actuator_lengths(model: Model, q: np.ndarray) -> np.ndarray:
 
 def actuator_forces(model: Model, ws: Workspace, state: State) -> np.ndarray:
     """Axial force of every actuator (N, tension positive): the work conjugate of the commanded
-    length, ``N = −∂U/∂L_cmd = −(∂U/∂λ)/L0``."""
-    return -actuator_dudlam(model, ws, state.q, state.lam) / model.actuators.l0
+    length, ``N = −∂(U + D)/∂L_cmd``, elastic plus the viscous (Kelvin–Voigt) part of damped
+    materials."""
+    return -actuator_dudlam(model, ws, state.q, state.lam, v=state.v, lam_rate=state.lam_rate) / model.actuators.l0
 
 
 def _triangle_frame(p: np.ndarray) -> np.ndarray:

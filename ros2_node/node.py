@@ -18,6 +18,7 @@ import collections
 import dataclasses
 import json
 import math
+import signal
 import time
 from pathlib import Path
 
@@ -181,6 +182,7 @@ class TwinNode:
         self._set_rates()
         self.wall_start = 0.0
         self.wall_stop = 0.0
+        self.stop_requested = False
         self.log.info(f"scene '{self.model.scene.name}': {self.model.ndof} DOFs, {self.model.actuators.l0.size} "
                       f"actuators, Δt = {self.dt:g} s, mode {self.p.mode}, warm-up {self.warmup_s:.2f} s; "
                       f"commands on {T.COMMANDS.resolved(n)}, {T.ACTUATOR_COMMANDS.resolved(n)}, "
@@ -319,8 +321,12 @@ class TwinNode:
         self._rtf_window.append((b, self.runner.t))
         self._publish(outcome.message if not outcome.converged or outcome.message else "", outcome.advanced)
 
+    def request_stop(self, *_args) -> None:
+        """SIGINT/SIGTERM: finish the current step, then close the recording and write the summary."""
+        self.stop_requested = True
+
     def _done(self) -> bool:
-        if not self.context.ok():
+        if self.stop_requested or not self.context.ok():
             return True
         return self.p.duration > 0 and self.runner.t >= self.p.duration - 0.5 * self.dt
 
@@ -435,6 +441,9 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
     node = None
     try:
         node = TwinNode(values, context=context, node_name=node_name)
+        # our own handlers: rclpy's do not reliably stop a loop that never blocks in the executor
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, node.request_stop)
         summary = node.spin()
     finally:
         if context.ok():

@@ -31,6 +31,10 @@ from . import topics as T
 from .convert import message_class, to_ros
 
 
+# steps of wall time the realtime player extrapolates the twin's time beyond its last report
+_MAX_EXTRAPOLATION = 3
+
+
 class CommandSource:
     """Commanded lengths (m) and rates (m/s) as functions of time."""
 
@@ -231,7 +235,9 @@ class Player:
         last = -1.0
         while self.context.ok():
             now = time.perf_counter()
-            t_twin = self.sim_time + (now - self.wall_at_sim_time)
+            # the twin's time: its last report plus the wall time since, capped at a few steps, so a
+            # twin that runs behind the wall clock is followed, not outrun by extrapolated commands
+            t_twin = self.sim_time + min(now - self.wall_at_sim_time, _MAX_EXTRAPOLATION * self.dt)
             if t_twin - self.t0 >= self.until:
                 break
             # the estimate may step back when a /clock arrives late: stamps must never decrease
