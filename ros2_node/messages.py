@@ -30,7 +30,7 @@ def stamp(t: float) -> dict:
 
 
 def stamp_seconds(st) -> float:
-    """Seconds of a ``builtin_interfaces/Time`` given as dict or message."""
+    """Seconds of a ``builtin_interfaces/Time`` or ``Duration``, given as dict or message."""
     if isinstance(st, dict):
         return st["sec"] + 1e-9 * st["nanosec"]
     return st.sec + 1e-9 * st.nanosec

@@ -44,11 +44,26 @@ _HEARTBEAT = 0.2
 _INPUTS = ((T.COMMANDS, "commands"), (T.ACTUATOR_COMMANDS, "actuator_commands"), (T.TRAJECTORY, "joint_trajectory"))
 
 
-def _percentiles(values, qs=(50, 99)) -> dict:
-    if not values:
-        return {f"p{q}": 0.0 for q in qs} | {"max": 0.0, "count": 0}
-    a = np.asarray(values)
-    return {f"p{q}": float(np.percentile(a, q)) for q in qs} | {"max": float(a.max()), "count": int(a.size)}
+class _Samples:
+    """The newest ``capacity`` values of a per-step quantity, in a buffer allocated once (a node runs
+    for hours: a growing list would allocate at every step), and the count and sum of all of them."""
+
+    def __init__(self, capacity: int = 1 << 19):
+        self._buf = np.empty(capacity)
+        self.count = 0
+        self.total = 0.0
+
+    def add(self, x: float) -> None:
+        self._buf[self.count % self._buf.size] = x
+        self.count += 1
+        self.total += x
+
+    def percentiles(self, qs=(50, 99), sign: float = 1.0) -> dict:
+        """Percentiles of ``sign`` × the values in the window, its max, and how many values it holds."""
+        a = sign * self._buf[:min(self.count, self._buf.size)]
+        if not a.size:
+            return {f"p{q}": 0.0 for q in qs} | {"max": 0.0, "count": 0}
+        return {f"p{q}": float(np.percentile(a, q)) for q in qs} | {"max": float(a.max()), "count": int(a.size)}
 
 
 class TwinNode:
@@ -170,9 +185,9 @@ class TwinNode:
         self._new_command = False
         self._cmd_recv_wall = 0.0
         self._last_command_wall = None
-        self._step_walls: list[float] = []
-        self._lateness: list[float] = []          # realtime: step end − its deadline (s; > 0 = missed)
-        self._latencies: list[float] = []
+        self._step_walls = _Samples()
+        self._lateness = _Samples()               # realtime: step end − its deadline (s; > 0 = missed)
+        self._latencies = _Samples()
         self._rtf_window = collections.deque(maxlen=1024)
         self._last_step_wall = 0.0
         self._published = 0
@@ -286,7 +301,7 @@ class TwinNode:
         if due or on_command:
             self._out(T.JOINT_STATES, live.fill_joint_state(s), lambda: M.joint_state(s), t)
             if on_command:
-                self._latencies.append(time.perf_counter() - self._cmd_recv_wall)
+                self._latencies.add(time.perf_counter() - self._cmd_recv_wall)
                 self._new_command = False
         if due or on_command or ack:
             timing = self._timing(outcome_message)
@@ -313,7 +328,7 @@ class TwinNode:
         outcome = self.runner.step()
         b = time.perf_counter()
         self._last_step_wall = b - a
-        self._step_walls.append(self._last_step_wall)
+        self._step_walls.add(self._last_step_wall)
         if outcome.advanced:
             self.steps_advanced += 1
         else:
@@ -360,7 +375,7 @@ class TwinNode:
             k += 1
             deadline = t0 + k * dt
             end = time.perf_counter()
-            self._lateness.append(end - deadline)
+            self._lateness.add(end - deadline)
             if end > deadline:
                 self.deadline_misses += 1
                 if end - deadline > self.p.max_lag:   # far behind: re-anchor instead of bursting
@@ -401,16 +416,16 @@ class TwinNode:
     def summary(self) -> dict:
         c = self.runner.counters
         wall = max(self.wall_stop - self.wall_start, 1e-12)
-        steps_wall = float(np.sum(self._step_walls)) if self._step_walls else 0.0
+        steps_wall = self._step_walls.total
         return {
             "scene": self.model.scene.name, "scene_file": str(self.scene_path), "mode": self.p.mode, "dt": self.dt,
             "node_name": self.node_name, "steps": c.steps, "steps_advanced": self.steps_advanced,
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
             "jit_warmup_s": self.warmup_s, "deadline_misses": self.deadline_misses, "overruns": self.overruns,
-            "step_wall_time_s": _percentiles(self._step_walls),
-            "deadline_slack_s": _percentiles([-x for x in self._lateness], (1, 50)),
-            "command_to_state_latency_s": _percentiles(self._latencies),
+            "step_wall_time_s": self._step_walls.percentiles(),
+            "deadline_slack_s": self._lateness.percentiles((1, 50), sign=-1.0),
+            "command_to_state_latency_s": self._latencies.percentiles(),
             "failed_steps": c.failed_steps, "flagged_steps": c.flagged_steps, "substepped_steps": c.substepped_steps,
             "commands_accepted": self.runner.schedule.accepted if self.runner.schedule else 0,
             "commands_rejected": dict(c.rejections), "published_states": self._published,

@@ -24,9 +24,8 @@ _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "comman
 
 
 def _localhost_only() -> None:
-    # DDS discovery must never leave the machine; this ROS 2 ignores ROS_LOCALHOST_ONLY.
+    # DDS discovery must never leave the machine (the core's main() sets the BLAS and numba defaults).
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def cmd_node(args: argparse.Namespace) -> int:

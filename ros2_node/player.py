@@ -147,7 +147,7 @@ class Player:
         self._note_time(msg.sim_time, now)
 
     def _on_clock(self, msg) -> None:
-        self._note_time(msg.clock.sec + 1e-9 * msg.clock.nanosec, time.perf_counter())
+        self._note_time(M.stamp_seconds(msg.clock), time.perf_counter())
 
     def _note_time(self, t: float, wall: float) -> None:
         if self.sim_time is None or t > self.sim_time:
@@ -157,7 +157,7 @@ class Player:
         ref = self.source.reference_pose
         if ref is None:
             return
-        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec - self.t0
+        t = M.stamp_seconds(msg.header.stamp) - self.t0
         if t < 0.0:
             return                           # before playback: the twin holds its start pose
         p_ref, q_ref = ref(t)

@@ -22,6 +22,7 @@ from flexmb_core.scene.schema import SolverSpec
 from flexmb_core.simulator import Simulator
 
 from .commands import CommandSchedule, Rejection
+from .messages import stamp_seconds
 
 
 @dataclass
@@ -183,17 +184,6 @@ class TwinRunner:
         return self.reporter.read(self.sim, full)
 
 
-def stamp_to_seconds(sec: int, nanosec: int) -> float:
-    return sec + 1e-9 * nanosec
-
-
-def time_from_start(d) -> float:
-    """Seconds of a ``builtin_interfaces/Duration`` (dict or message)."""
-    if isinstance(d, dict):
-        return d["sec"] + 1e-9 * d["nanosec"]
-    return d.sec + 1e-9 * d.nanosec
-
-
 def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:
     """Feed one decoded command message (rclpy message or dict) to the runner.
 
@@ -206,11 +196,11 @@ def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejec
     if topic_kind == "actuator_commands":
         st = get(get(msg, "header"), "stamp")
         return runner.command_named(topic, list(get(msg, "names")), list(get(msg, "lengths")),
-                                    list(get(msg, "velocities")), stamp_to_seconds(get(st, "sec"), get(st, "nanosec")))
+                                    list(get(msg, "velocities")), stamp_seconds(st))
     if topic_kind == "joint_trajectory":
         st = get(get(msg, "header"), "stamp")
-        pts = [(time_from_start(get(p, "time_from_start")), list(get(p, "positions")), list(get(p, "velocities")))
+        pts = [(stamp_seconds(get(p, "time_from_start")), list(get(p, "positions")), list(get(p, "velocities")))
                for p in get(msg, "points")]
         return runner.command_trajectory(topic, list(get(msg, "joint_names")),
-                                         stamp_to_seconds(get(st, "sec"), get(st, "nanosec")), pts)
+                                         stamp_seconds(st), pts)
     raise ValueError(f"unknown command topic kind {topic_kind!r}")

@@ -72,9 +72,11 @@ def find_mcap(path: Path) -> Path:
             files = []
     if not files:
         files = sorted(path.glob("*.mcap"))
+    if not files:
+        raise BagError(f"{path}: no .mcap file in this directory (expected one .mcap file, with metadata.yaml "
+                       "in a rosbag2 recording)")
     if len(files) != 1:
-        raise BagError(f"{path}: expected one .mcap file in the bag directory, found "
-                       f"{[f.name for f in files] or 'none'}")
+        raise BagError(f"{path}: expected one .mcap file in the bag directory, found {[f.name for f in files]}")
     return files[0]
 
 
@@ -238,8 +240,10 @@ class BagReader:
             if ch is None or (topics is not None and ch.topic not in topics):
                 continue
             schema = self.schemas.get(ch.schema_id)
+            # the decoder is looked up when a message is decoded, so a channel that is not ROS 2
+            # CDR fails (BagError) only for a caller that decodes it
             yield BagMessage(ch.topic, schema.name if schema else "", m.log_time, bytes(m.data), m.channel_id,
-                             self._decoder(m.channel_id))
+                             lambda data, _c=m.channel_id: self._decoder(_c)(data))
 
     def counts(self) -> dict[str, int]:
         """Messages per topic."""

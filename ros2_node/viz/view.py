@@ -24,20 +24,22 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .layout import TwinLayout
-from .recording import METADATA_NAME, Recording
+from .. import topics as T
+from ..bag.recorder import METADATA_NAME
+from ..messages import MARKER_ADD, MARKER_LINE_STRIP
+from .recording import Recording
 
-MARKER_LINE_STRIP, MARKER_ADD = 4, 0
-
-T_JOINT_STATE = "sensor_msgs/msg/JointState"
-T_ACTUATOR_STATE = "flexmb_msgs/msg/ActuatorState"
-T_POSE = "geometry_msgs/msg/PoseStamped"
-T_SHAPE = "visualization_msgs/msg/MarkerArray"
-T_STATUS = "flexmb_msgs/msg/TwinStatus"
-T_TF = "tf2_msgs/msg/TFMessage"
-T_CLOCK = "rosgraph_msgs/msg/Clock"
-T_COMMANDS = "std_msgs/msg/Float64MultiArray"
-T_ACTUATOR_COMMAND = "flexmb_msgs/msg/ActuatorCommand"
-T_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
+# message types by the topic contract (ros2_node.topics)
+T_JOINT_STATE = T.JOINT_STATES.type
+T_ACTUATOR_STATE = T.ACTUATOR_STATES.type
+T_POSE = T.PLATFORM_POSE.type
+T_SHAPE = T.SHAPE.type
+T_STATUS = T.STATUS.type
+T_TF = T.TF.type
+T_CLOCK = T.CLOCK.type
+T_COMMANDS = T.COMMANDS.type
+T_ACTUATOR_COMMAND = T.ACTUATOR_COMMANDS.type
+T_TRAJECTORY = T.TRAJECTORY.type
 
 
 @dataclass
