@@ -10,6 +10,7 @@ from numba import njit
 
 from .model.assembly import actuator_dudlam
 from .model.model import Model
+from .model.shell_compile import shell_point_node
 from .model.workspace import State, Workspace
 from .scene.schema import Output
 
@@ -182,6 +183,12 @@ def evaluate_output(model: Model, ws: Workspace, state: State, out: Output, ener
     if out.kind == "member_shape":
         info = model.member(out.member)
         return q[info.ydofs].tolist()
+    if out.kind == "shell_point":
+        info = model.shell(out.shell)
+        d = info.ydofs[shell_point_node(info, out.at, f"outputs.{out.name}", out.edge and out.edge[1])]
+        return {"position": q[d].tolist(), "displacement": (q[d] - model.q0[d]).tolist()}
+    if out.kind == "shell_shape":
+        return q[model.shell(out.shell).ydofs].tolist()
     if out.kind == "energy":
         return dict(energy or {})
     if out.kind == "joint_angle":

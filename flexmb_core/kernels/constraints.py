@@ -180,3 +180,45 @@ def hinge_group(q, mult, offset, dofs, alpha, beta, smap, want_k, r, rc, kdata, 
                                 ke[6 + 3 * bb + j, 3 * ba + i] += lam * s
         if want_k:
             scatter_matrix(smap[h], ke, kdata)
+
+
+@njit(cache=True)
+def director_tie_group(q, mult, offset, dofs, alpha, smap, want_k, r, rc, kdata, ke):
+    """Shell director tied to a frame section (``shell_rigid`` joints), by multipliers:
+    c = G − Σ α_j W_j = 0 (3 equations) with W = (V1, V2, V1 × V2) of the frame node and α from the
+    reference geometry (|G⁰| = 1 ⇒ the tie also holds the director's length at the node).
+
+    ``dofs (nt, 9)`` = [G, V1, V2]; ``alpha (nt, 3)``; multipliers at ``mult[offset + 3t + i]``,
+    violations into ``rc`` at the same place; local unknowns [G, V1, V2, λ] (12), ``smap (nt, 144)``,
+    ``ke (12, 12)`` scratch.
+    """
+    for t in range(dofs.shape[0]):
+        v1 = (q[dofs[t, 3]], q[dofs[t, 4]], q[dofs[t, 5]])
+        v2 = (q[dofs[t, 6]], q[dofs[t, 7]], q[dofs[t, 8]])
+        w3 = _skew_mul(v1, v2)
+        al = alpha[t]
+        f = _frame_fibre(al, v1, v2, w3)
+        lam = (mult[offset + 3 * t], mult[offset + 3 * t + 1], mult[offset + 3 * t + 2])
+        if want_k:
+            ke[:, :] = 0.0
+        for i in range(3):
+            rc[offset + 3 * t + i] = q[dofs[t, i]] - f[i]
+            r[dofs[t, i]] += lam[i]
+            if want_k:
+                ke[9 + i, i] += 1.0
+                ke[i, 9 + i] += 1.0
+            for blk in range(2):
+                for j in range(3):
+                    g = -_dfibre(al, v1, v2, blk, i, j)
+                    r[dofs[t, 3 + 3 * blk + j]] += lam[i] * g
+                    if want_k:
+                        ke[9 + i, 3 + 3 * blk + j] += g
+                        ke[3 + 3 * blk + j, 9 + i] += g
+        if want_k:
+            # Σ_i λ_i ∂²c_i/∂V1_j∂V2_m = −α3 Σ_i λ_i ε_ijm = α3 [λ]×_jm
+            for j in range(3):
+                for m in range(3):
+                    h = al[2] * _skew(lam, j, m)
+                    ke[3 + j, 6 + m] += h
+                    ke[6 + m, 3 + j] += h
+            scatter_matrix(smap[t], ke, kdata)

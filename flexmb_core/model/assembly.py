@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.constraints import hinge_group, rigid_corner_group
+from ..kernels.constraints import director_tie_group, hinge_group, rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_group_actuator_dudlam
 from ..kernels.moments import conservative_moments, follower_moments
+from ..kernels.shell import shell_group
 from ..kernels.truss import truss_group, truss_group_actuator_dudlam
 from ..signals import evaluate
 from .model import Model
@@ -58,6 +59,9 @@ def assemble_constraints(model: Model, ws: Workspace, q: np.ndarray, mult: np.nd
     if model.hinge_dofs.shape[0]:
         hinge_group(q, mult, 6 * model.corner_dofs.shape[0], model.hinge_dofs, model.hinge_alpha,
                     model.hinge_beta, model.hinge_smap, want_k, ws.r, ws.rc, ws.kdata, ws.hinge_ke)
+    if model.tie_dofs.shape[0]:
+        director_tie_group(q, mult, 6 * model.corner_dofs.shape[0] + 2 * model.hinge_dofs.shape[0], model.tie_dofs,
+                           model.tie_alpha, model.tie_smap, want_k, ws.r, ws.rc, ws.kdata, ws.tie_ke)
 
 
 def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k: bool,
@@ -93,6 +97,9 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
                             ws.kdata, *ws.truss_scratch)
         energy += u
         diss += dp
+    for g in model.shell_groups:
+        energy += shell_group(q, g.edofs, g.phi, g.dphi, g.zeta, g.a0inv, g.w, g.mat, g.smap, want_k, ws.r,
+                              ws.kdata, *ws.shell_scratch)
     ws.dissipation = diss
     assemble_constraints(model, ws, q, ws.no_mult if mult is None else mult, want_k)
     m = model.moments

@@ -14,6 +14,9 @@ from ..errors import SceneError
 from ..scene.schema import Member, Scene, Signal
 from .frame_geometry import frame_element_geometry, frame_element_mass
 from .model import Actuators, Drives, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
+from .shell_compile import (build_shell_groups, clamp_node_gdofs, compact_drafts, edge_load_patterns,
+                            edge_support_dofs, number_shell_nodes, shell_element_pairs, shell_infos,
+                            shell_point_node)
 
 
 def _freeze(*arrays: np.ndarray) -> None:
@@ -144,6 +147,8 @@ def compile_scene(scene: Scene) -> Model:
         if mem.kind == "actuator" and mem.arc_center is not None:
             raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
         member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
+    drafts = number_shell_nodes(scene, node_lookup, node_names, node_x, ydof,
+                                {mi.name: mi.nodes for mi in member_infos}, take)
     corners: list[tuple[str, str, str]] = []
     hinges: list[tuple[str, str, str, tuple]] = []
     if scene.joints:
@@ -157,23 +162,33 @@ def compile_scene(scene: Scene) -> Model:
         member_infos = [MemberInfo(mi.name, mi.kind, mi.nodes, compact[mi.ydofs],
                                    np.where(mi.vdofs >= 0, compact[np.maximum(mi.vdofs, 0)], -1), mi.length)
                         for mi in member_infos]
+        compact_drafts(drafts, compact)
     unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
     if unused:
         raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member")
 
     q0_arr = np.asarray(q0, dtype=float)
     nodes_xyz = np.asarray(node_x)
-    l_char = max(float(np.linalg.norm(nodes_xyz.max(0) - nodes_xyz.min(0))), max(mi.length for mi in member_infos))
+    l_char = max(float(np.linalg.norm(nodes_xyz.max(0) - nodes_xyz.min(0))),
+                 max((mi.length for mi in member_infos), default=0.0))
     dof_scale = np.where(np.asarray(scale_kind) == 0, l_char, 1.0)
     node_ydofs = np.asarray(ydof, dtype=np.int64)[:, None] + np.arange(3)
     member_lookup = {mi.name: i for i, mi in enumerate(member_infos)}
+    shells = shell_infos(drafts, node_ydofs)
 
     # -- prescribed DOFs ------------------------------------------------------------------
     fixed = np.zeros(ndof, dtype=bool)
     drive_rows: list[tuple] = []
     drive_vectors: list[tuple] = []
+    for ids in edge_support_dofs(scene, shells):
+        fixed[ids] = True
     for s in scene.supports:
+        if s.edge is not None:
+            continue
         n = node_lookup[s.node]
+        if s.type == "clamp":
+            for ids in clamp_node_gdofs(shells, n):
+                fixed[ids] = True
         if s.type in ("clamp", "ball", "driven"):
             fixed[node_ydofs[n]] = True
         if s.type == "driven":
@@ -321,7 +336,9 @@ def compile_scene(scene: Scene) -> Model:
         ids = np.concatenate((infos_by_name[ma].vdofs[ka], infos_by_name[mb].vdofs[kb]))
         hinge_dofs.append(ids)
         hinge_sys.append(np.concatenate((free_index[ids], base + 2 * hi + np.arange(2))))
-    nsys = base + 2 * len(hinges)
+    tie_dofs, tie_alpha, tie_sys = _shell_frame_ties(scene, shells, infos_by_name, member_geom, node_lookup,
+                                                     free_index, base + 2 * len(hinges))
+    nsys = base + 2 * len(hinges) + 3 * len(tie_dofs)
 
     # -- sparse pattern over the system (free DOFs, then multipliers) ----------------------
     pair_r, pair_c = [], []
@@ -332,11 +349,14 @@ def compile_scene(scene: Scene) -> Model:
     for ed in truss_build.get("edofs", []):
         pair_r.append(np.repeat(ed, 6))
         pair_c.append(np.tile(ed, 6))
+    for ed in shell_element_pairs(shells):
+        pair_r.append(np.repeat(ed, ed.size))
+        pair_c.append(np.tile(ed, ed.size))
     pair_r.extend(mass_rows)
     pair_c.extend(mass_cols)
     pr = free_index[np.concatenate(pair_r)]
     pc = free_index[np.concatenate(pair_c)]
-    for idx in corner_sys + hinge_sys:
+    for idx in corner_sys + hinge_sys + tie_sys:
         pr = np.concatenate((pr, np.repeat(idx, idx.size)))
         pc = np.concatenate((pc, np.tile(idx, idx.size)))
     ok = (pr >= 0) & (pc >= 0)
@@ -380,6 +400,12 @@ def compile_scene(scene: Scene) -> Model:
                            np.asarray(truss_build["tau"], dtype=float))
         _freeze(truss.edofs, truss.l0, truss.ea, truss.act, truss.smap, truss.member, truss.tau)
 
+    shell_groups = build_shell_groups(scene, shells, scatter_map, mass_rows, mass_cols, mass_vals)
+    for out in scene.outputs:
+        if out.kind == "shell_point":
+            shell_point_node(next(i for i in shells if i.name == out.shell), out.at,
+                             f"{scene.source}:outputs.{out.name}.at", out.edge and out.edge[1])
+
     # -- mass -------------------------------------------------------------------------------
     mr, mc, mv = np.concatenate(mass_rows), np.concatenate(mass_cols), np.concatenate(mass_vals)
     mfull = sp.csr_matrix((mv, (mr, mc)), shape=(ndof, ndof))
@@ -395,15 +421,18 @@ def compile_scene(scene: Scene) -> Model:
     total_mass = float((mfull @ u_trans)[:, 0].sum())
 
     # -- loads ------------------------------------------------------------------------------
-    load_vectors = np.zeros((len(scene.forces), ndof))
+    edge_patterns, edge_signals, edge_moments = edge_load_patterns(scene, shells, ndof)
+    load_vectors = np.zeros((len(scene.forces) + len(edge_patterns), ndof))
     for i, f in enumerate(scene.forces):
         load_vectors[i, node_ydofs[node_lookup[f.node]]] = f.force
+    for i, pattern in enumerate(edge_patterns):
+        load_vectors[len(scene.forces) + i] = pattern
     gravity_vector = np.zeros(ndof)
     gravity_signal = Signal()
     if scene.gravity is not None:
         gravity_vector = mfull @ (u_trans @ np.asarray(scene.gravity.acceleration, dtype=float))
         gravity_signal = scene.gravity.signal
-    moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map)
+    moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map, edge_moments)
 
     corner_arrays = (np.asarray(corner_dofs, dtype=np.int64).reshape(-1, 12),
                      np.asarray(corner_alpha, dtype=float).reshape(-1, 2, 3),
@@ -412,7 +441,10 @@ def compile_scene(scene: Scene) -> Model:
                     np.asarray(hinge_alpha, dtype=float).reshape(-1, 3),
                     np.asarray(hinge_beta, dtype=float).reshape(-1, 2, 3),
                     np.asarray([scatter_map_sys(idx) for idx in hinge_sys], dtype=np.int64).reshape(-1, 196))
-    _freeze(*corner_arrays, *hinge_arrays)
+    tie_arrays = (np.asarray(tie_dofs, dtype=np.int64).reshape(-1, 9),
+                  np.asarray(tie_alpha, dtype=float).reshape(-1, 3),
+                  np.asarray([scatter_map_sys(idx) for idx in tie_sys], dtype=np.int64).reshape(-1, 144))
+    _freeze(*corner_arrays, *hinge_arrays, *tie_arrays)
     drives = None
     if drive_rows:
         drives = Drives(np.array([r[0] for r in drive_rows], dtype=np.int64), np.array([r[1] for r in drive_rows]),
@@ -433,10 +465,11 @@ def compile_scene(scene: Scene) -> Model:
     _freeze(q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, *mass_csr, load_vectors,
             gravity_vector, node_ydofs, act_l0, act_stroke, act_ends, actuators.member)
     return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
-                 tuple(groups), truss, moments, load_vectors, tuple(f.signal for f in scene.forces),
+                 tuple(groups), truss, moments, load_vectors,
+                 tuple(f.signal for f in scene.forces) + tuple(edge_signals),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
                  scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
-                 *hinge_arrays, node_lookup, member_lookup)
+                 *hinge_arrays, node_lookup, member_lookup, shell_groups, shells, *tie_arrays)
 
 
 def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:
@@ -506,9 +539,18 @@ def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_look
     return np.array([find(i) for i in range(ndof)], dtype=np.int64)
 
 
-def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map) -> MomentLoads:
+def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map,
+                  extra_conservative=()) -> MomentLoads:
+    """Member end moments, plus ``extra_conservative`` (vector ids, axes, magnitude, signal) entries
+    (shell edge moments on the directors)."""
     f_v, f_m, f_s, f_sig = [], [], [], []
     c_v, c_ax, c_mag, c_s, c_sig = [], [], [], [], []
+    for ids, axes, mag, sig in extra_conservative:
+        c_v.append(ids)
+        c_ax.append(axes)
+        c_mag.append(mag)
+        c_s.append(scatter_map(ids))
+        c_sig.append(sig)
     for mo in scene.moments:
         info = member_infos[member_lookup[mo.member]]
         k = int(np.nonzero(info.nodes == node_lookup[mo.node])[0][0])
@@ -542,3 +584,28 @@ def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, 
     _freeze(out.follower_vdofs, out.follower_mbody, out.follower_smap, out.cons_vdofs, out.cons_axes,
             out.cons_magnitude, out.cons_smap)
     return out
+
+
+def _shell_frame_ties(scene: Scene, shells, infos_by_name, member_geom, node_lookup, free_index: np.ndarray,
+                      first_multiplier: int) -> tuple[list, list, list]:
+    """``shell_rigid`` joints: the shell director G at a corner node tied to the frame member's
+    section vectors, G = α1 V1 + α2 V2 + α3 V1 × V2 with α from the reference geometry (3
+    multipliers each, numbered from ``first_multiplier``). Returns (dofs [G, V1, V2] (9,), α (3,),
+    system ids (12,)) per tie."""
+    dofs, alpha, sys_ids = [], [], []
+    by_shell = {i.name: i for i in shells}
+    for j in scene.shell_joints:
+        if j.type != "shell_rigid":
+            continue
+        n = node_lookup[j.node]
+        info = by_shell[j.shell]
+        ks = int(np.nonzero(info.nodes == n)[0][0])
+        mi = infos_by_name[j.member]
+        km = int(np.nonzero(mi.nodes == n)[0][0])
+        _, _, v1, v2 = member_geom[j.member]
+        frame = np.array([v1[km], v2[km], np.cross(v1[km], v2[km])])
+        alpha.append(frame @ info.normal0[ks])
+        ids = np.concatenate((info.gdofs[ks], mi.vdofs[km]))
+        dofs.append(ids)
+        sys_ids.append(np.concatenate((free_index[ids], first_multiplier + 3 * len(sys_ids) + np.arange(3))))
+    return dofs, alpha, sys_ids

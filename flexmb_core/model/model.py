@@ -55,6 +55,48 @@ class TrussGroup:
 
 
 @dataclass(frozen=True)
+class ShellGroup:
+    """Cubic shell triangles sharing one quadrature (SPEC §2, :mod:`flexmb_core.kernels.shell`).
+
+    ``quadrature`` (n, n_ζ); rule arrays shared by the group: ``phi (npt, 10)``, ``dphi (npt, 10, 2)``,
+    ``zeta (npt,)``; per element: ``edofs (ne, 70)`` [Y, G, a] per node, ``a0inv (ne, npt, 3, 3)``,
+    ``w (ne, npt)`` (m³), ``mat (ne, 3)`` [λ, μ (Pa), h0/2 (m)], ``smap (ne, 4900)``.
+    """
+
+    quadrature: tuple[int, int]
+    edofs: np.ndarray
+    phi: np.ndarray
+    dphi: np.ndarray
+    zeta: np.ndarray
+    a0inv: np.ndarray
+    w: np.ndarray
+    mat: np.ndarray
+    smap: np.ndarray
+
+    @property
+    def n_elements(self) -> int:
+        return self.edofs.shape[0]
+
+
+@dataclass(frozen=True)
+class ShellInfo:
+    """Where a shell lives in the DOF vector: per mesh node its global node id ``nodes (N,)``,
+    ``ydofs (N, 3)``, ``gdofs (N, 3)`` (director G), ``adofs (N,)`` (strain rate); ``tri (ne, 10)``
+    mesh-node connectivity; ``edges`` name → mesh-node ids along the edge; ``x0, normal0 (N, 3)``
+    the reference positions and unit normals."""
+
+    name: str
+    nodes: np.ndarray
+    ydofs: np.ndarray
+    gdofs: np.ndarray
+    adofs: np.ndarray
+    tri: np.ndarray
+    edges: dict
+    x0: np.ndarray
+    normal0: np.ndarray
+
+
+@dataclass(frozen=True)
 class MomentLoads:
     """Moments through section vectors (see :mod:`flexmb_core.kernels.moments`)."""
 
@@ -155,6 +197,11 @@ class Model:
     hinge_smap: np.ndarray = field(default_factory=lambda: np.zeros((0, 196), dtype=np.int64))
     node_lookup: dict[str, int] = field(default_factory=dict)
     member_lookup: dict[str, int] = field(default_factory=dict)
+    shell_groups: tuple[ShellGroup, ...] = ()
+    shells: tuple[ShellInfo, ...] = ()
+    tie_dofs: np.ndarray = field(default_factory=lambda: np.zeros((0, 9), dtype=np.int64))
+    tie_alpha: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    tie_smap: np.ndarray = field(default_factory=lambda: np.zeros((0, 144), dtype=np.int64))
 
     @property
     def nfree(self) -> int:
@@ -168,7 +215,8 @@ class Model:
 
     @property
     def n_multipliers(self) -> int:
-        """Lagrange multipliers (6 per rigid corner), numbered after the free DOFs."""
+        """Lagrange multipliers (6 per rigid corner, 2 per off-plane hinge, 3 per shell–frame tie),
+        numbered after the free DOFs."""
         return self.nsys - self.nfree
 
     @property
@@ -181,6 +229,12 @@ class Model:
             return self.node_lookup[name]
         except KeyError:
             raise KeyError(f"unknown node '{name}'; known: {sorted(self.scene.nodes)}") from None
+
+    def shell(self, name: str) -> ShellInfo:
+        for info in self.shells:
+            if info.name == name:
+                return info
+        raise KeyError(f"unknown shell '{name}'; known: {[i.name for i in self.shells]}")
 
     def member(self, name: str) -> MemberInfo:
         try:
@@ -199,11 +253,16 @@ class Model:
             for e in range(self.truss.n_elements):
                 k = "actuator(bar)" if self.truss.act[e] >= 0 else "truss"
                 kinds[k] = kinds.get(k, 0) + 1
+        n_shell = sum(g.n_elements for g in self.shell_groups)
+        if n_shell:
+            kinds["shell"] = n_shell
         return {"scene": self.scene.name, "dofs": self.ndof, "free_dofs": self.nfree,
                 "prescribed_dofs": self.ndof - self.nfree, "nodes": len(self.node_names),
                 "members": len(self.members), "elements": kinds, "actuators": list(self.actuators.names),
                 "tangent_nonzeros": self.nnz, "mass_kg": self.total_mass,
                 "material_damping": self.material_damping,
                 "rigid_corners": self.corner_dofs.shape[0], "multiplier_hinges": self.hinge_dofs.shape[0],
+                "shells": {i.name: {"elements": int(i.tri.shape[0]), "nodes": int(i.nodes.size)} for i in self.shells},
+                "shell_frame_ties": self.tie_dofs.shape[0],
                 "frame_groups": [f"order {g.order}, {g.n_elements} el., {g.w.shape[1]} points/el."
                                  for g in self.frame_groups]}

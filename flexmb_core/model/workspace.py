@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels.frame3d import frame_scratch
+from ..kernels.shell import shell_scratch
 from .model import Model
 
 
@@ -66,6 +67,7 @@ class Workspace:
         self.f_ext = np.zeros(n)
         self.frame_scratch = [frame_scratch(g.w.shape[1], g.dax.shape[2]) for g in model.frame_groups]
         self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros(6), np.zeros((6, 6)))   # qe, ve, re, ke
+        self.shell_scratch = shell_scratch() if model.shell_groups else None
         self.zero_v = np.zeros(n)                   # rates of an undamped evaluation (statics, modes)
         self.zero_lam_rate = np.zeros(model.actuators.l0.size)
         self.dissipation = 0.0                      # material damping power of the last assembly (W)
@@ -76,4 +78,5 @@ class Workspace:
         self.rc = np.zeros(model.n_multipliers)     # constraint violations of rigid corners
         self.corner_ke = np.zeros((18, 18))
         self.hinge_ke = np.zeros((14, 14))
+        self.tie_ke = np.zeros((12, 12))
         self.no_mult = np.zeros(model.n_multipliers)

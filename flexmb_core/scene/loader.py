@@ -16,6 +16,7 @@ from ..errors import SceneError
 from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
+from .shells import edge_ref, parse_edge_loads, parse_shell, parse_shell_joint
 
 OUTPUT_KINDS = {
     "node_position": ("node",),
@@ -29,6 +30,8 @@ OUTPUT_KINDS = {
     "platform_pose": ("nodes",),
     "actuator_velocity": ("actuator",),
     "joint_angle": ("node", "members"),
+    "shell_point": ("shell", "at"),
+    "shell_shape": ("shell",),
 }
 
 
@@ -70,24 +73,29 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     """Validate a scene given as nested dicts (as parsed from YAML)."""
     root = Node(data, "", source).mapping(
         {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
-         "point_masses", "damping", "solver", "outputs", "commands", "joints"},
-        {"name", "materials", "sections", "nodes", "members"})
+         "point_masses", "damping", "solver", "outputs", "commands", "joints", "shells"},
+        {"name", "materials"})
     name = root.get("name").string()
     description = root.get("description", "").value
     if not isinstance(description, str):
         raise root.fail("expected a string", "description")
 
     materials = {k: _material(k, n) for k, n in root.get("materials").items()}
-    sections = {k: _section(k, n) for k, n in root.get("sections").items()}
-    nodes = {k: n.vector(3, unit="m") for k, n in root.get("nodes").items()}
-    if not materials or not sections or not nodes:
-        raise root.fail("materials, sections and nodes must each define at least one entry")
-    members = {k: _member(k, n, materials, sections, nodes) for k, n in root.get("members").items()}
-    if not members:
-        raise root.fail("at least one member is required", "members")
+    sections = {k: _section(k, n) for k, n in root.get("sections", {}).items()}
+    nodes = {k: n.vector(3, unit="m") for k, n in root.get("nodes", {}).items()}
+    if not materials:
+        raise root.fail("at least one material is required", "materials")
+    members = {k: _member(k, n, materials, sections, nodes) for k, n in root.get("members", {}).items()}
+    shells = {k: parse_shell(k, n, materials, nodes) for k, n in root.get("shells", {}).items()}
+    if not members and not shells:
+        raise root.fail("a scene needs at least one member or one shell", "members")
+    clash = sorted(set(members) & set(shells))
+    if clash:
+        raise root.fail(f"name(s) {clash} are used by both a member and a shell; names must be unique", "shells")
 
-    supports = tuple(_support(n, nodes, members) for n in root.get("supports", []).list())
+    supports = tuple(_support(n, nodes, members, shells) for n in root.get("supports", []).list())
     forces, moments, gravity = _loads(root.get("loads", {}), nodes, members)
+    edge_loads = parse_edge_loads(root.get("loads", {}), shells)
     pmasses = tuple(PointMass(k, n.mapping({"node", "mass"}, {"node", "mass"}).get("node").name_in(nodes, "node"),
                               n.get("mass").number(positive=True, unit="kg"))
                     for k, n in root.get("point_masses", {}).items())
@@ -98,16 +106,22 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     damp = damp.mapping({"mass_proportional"})
     c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
     solver = _solver(root.get("solver", {}), overrides or {})
-    outputs = tuple(_output(k, n, nodes, members) for k, n in root.get("outputs", {}).items())
+    outputs = tuple(_output(k, n, nodes, members, shells) for k, n in root.get("outputs", {}).items())
     commands = _commands(root.get("commands"), members) if root.has("commands") else None
-    joints = tuple(_joint(n, nodes, members) for n in root.get("joints", []).list())
+    joint_nodes = root.get("joints", []).list()
+    shell_types = ("hinge_line", "shell_rigid")
+    joints = tuple(_joint(n, nodes, members) for n in joint_nodes
+                   if not (isinstance(n.value, dict) and n.value.get("type") in shell_types))
+    shell_joints = tuple(parse_shell_joint(n, nodes, members, shells) for n in joint_nodes
+                         if isinstance(n.value, dict) and n.value.get("type") in shell_types)
     return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
-                 moments, pmasses, gravity, c_m, solver, outputs, commands, joints)
+                 moments, pmasses, gravity, c_m, solver, outputs, commands, joints, shells, shell_joints,
+                 edge_loads)
 
 
 def _joint(n: Node, nodes, members) -> Joint:
     n.mapping({"type", "node", "members", "axis"}, {"type", "node", "members"})
-    typ = n.get("type").string(("spherical", "revolute", "rigid"))
+    typ = n.get("type").string(("spherical", "revolute", "rigid", "hinge_line", "shell_rigid"))
     node = n.get("node").name_in(nodes, "node")
     mems = tuple(m.name_in(members, "member") for m in n.get("members").list())
     if len(mems) < 2 or len(set(mems)) != len(mems):
@@ -280,8 +294,16 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
                   n.get("integration", "reduced").string(("reduced", "full")), via)
 
 
-def _support(n: Node, nodes, members) -> Support:
-    n.mapping({"node", "type", "member", "vector", "rotation", "translation", "axis"}, {"node", "type"})
+def _support(n: Node, nodes, members, shells) -> Support:
+    n.mapping({"node", "edge", "type", "member", "vector", "rotation", "translation", "axis"}, {"type"})
+    if n.has("edge"):
+        if n.has("node"):
+            raise n.fail("a support is on a 'node' or on a shell 'edge', not both")
+        extra = sorted(k for k in n.value if k not in ("edge", "type"))
+        if extra:
+            raise n.fail(f"key(s) {extra} do not apply to an edge support; expected 'edge' and 'type'")
+        typ = n.get("type").string(("clamp", "ball"))
+        return Support("", typ, edge=edge_ref(n.get("edge"), shells))
     typ = n.get("type").string(("clamp", "ball", "fixed_vector", "revolute", "driven"))
     node = n.get("node").name_in(nodes, "node")
     member = n.get("member").name_in(members, "member") if n.has("member") else None
@@ -325,7 +347,7 @@ def _unit3(v: tuple[float, ...]) -> tuple[float, float, float]:
 
 
 def _loads(n: Node, nodes, members):
-    n.mapping({"gravity", "forces", "moments"})
+    n.mapping({"gravity", "forces", "moments", "edge_forces", "edge_moments"})
     gravity = None
     if n.has("gravity"):
         g = n.get("gravity")
@@ -385,14 +407,22 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
     return s
 
 
-def _output(name: str, n: Node, nodes, members) -> Output:
-    kind = n.mapping({"kind", "node", "member", "actuator", "nodes", "members"}, {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
+def _output(name: str, n: Node, nodes, members, shells) -> Output:
+    kind = n.mapping({"kind", "node", "member", "actuator", "nodes", "members", "shell", "at", "edge"},
+                     {"kind"}).get("kind").string(tuple(OUTPUT_KINDS))
     need = OUTPUT_KINDS[kind]
-    extra = sorted(k for k in n.value if k != "kind" and k not in need)
+    extra = sorted(k for k in n.value if k != "kind" and k not in need and not (kind == "shell_point" and k == "edge"))
     if extra:
         raise n.fail(f"key(s) {extra} do not apply to output kind '{kind}'; expected {list(need)}")
     node = n.get("node").name_in(nodes, "node") if "node" in need else None
     member = n.get("member").name_in(members, "member") if "member" in need else None
+    if "shell" in need:
+        shell = n.get("shell").name_in(shells, "shell")
+        at = n.get("at").vector(3, unit="m") if "at" in need else None
+        edge = edge_ref(n.get("edge"), shells) if n.has("edge") else None
+        if edge is not None and edge[0] != shell:
+            raise n.fail(f"edge '{edge[0]}.{edge[1]}' is not an edge of shell '{shell}'", "edge")
+        return Output(name, kind, shell=shell, at=at, edge=edge)
     pose_nodes: tuple[str, ...] = ()
     if "members" in need:
         lst = [m.name_in(members, "member") for m in n.get("members").list()]

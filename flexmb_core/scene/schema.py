@@ -93,9 +93,78 @@ class Member:
     via: tuple[str, ...] = ()        # named nodes the member passes through (continuous vectors)
 
 
+EdgeRef = tuple[str, str]            # (shell name, edge name)
+
+
+@dataclass(frozen=True)
+class ShellMeshSpec:
+    """A mesh generator of cubic shell triangles (:mod:`flexmb_core.model.shell_mesh`).
+
+    ``rectangle``: bilinear patch through 4 ``corners`` (scene nodes), ``divisions`` (n_u, n_v);
+    ``triangle``: 3 ``corners``, ``divisions`` (n,); ``annulus``: flat sector about ``center`` with
+    normal ``axis``, radii, ``angles`` (rad) from ``reference``; ``cylinder``: patch of ``radius`` and
+    ``length`` along ``axis`` from ``center``, ``angles`` (rad) from ``reference``.
+    """
+
+    kind: str                        # rectangle | triangle | annulus | cylinder
+    divisions: tuple[int, ...]
+    corners: tuple[str, ...] = ()
+    pattern: str = "alternate"       # cell diagonals: alternate | right | left
+    center: Vec3 | None = None
+    axis: Vec3 | None = None
+    reference: Vec3 | None = None
+    inner_radius: float = 0.0
+    outer_radius: float = 0.0
+    radius: float = 0.0
+    length: float = 0.0
+    angles: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Shell:
+    """A solid-like positional shell part (SPEC §2): a generated mesh, a thickness and a material.
+
+    ``quadrature`` = (n, n_ζ): an n × n conical-product triangle rule (exact to degree 2n − 1) and
+    n_ζ Gauss points through the thickness."""
+
+    name: str
+    mesh: ShellMeshSpec
+    thickness: float
+    material: str
+    quadrature: tuple[int, int] = (4, 3)
+
+
+@dataclass(frozen=True)
+class ShellJoint:
+    """``hinge_line``: the coincident nodes of the listed shell edges (and of ``member``, a frame
+    or truss member laid along them) share their positions only; each shell keeps its own
+    director G, so the common line is a hinge (SPEC §5.3 (i)).
+    ``rigid``: at ``node`` (a corner of ``shell``), the shell's director G is tied to the frame
+    ``member``'s section vectors by Lagrange multipliers, G = Σ α_j W_j (W = V1, V2, V1 × V2);
+    with the shared position it transmits force and the two bending moments (the shell has no
+    drilling stiffness at a node)."""
+
+    type: str
+    edges: tuple[EdgeRef, ...] = ()
+    member: str | None = None
+    node: str | None = None
+    shell: str | None = None
+
+
+@dataclass(frozen=True)
+class EdgeLoad:
+    """Dead force or conservative moment per unit length along a shell edge (N/m or N·m/m)."""
+
+    name: str
+    edge: EdgeRef
+    kind: str                        # force | moment
+    value: Vec3
+    signal: Signal
+
+
 @dataclass(frozen=True)
 class Support:
-    node: str
+    node: str                        # "" for an edge support
     type: str                        # clamp | ball | fixed_vector | revolute | driven
     member: str | None = None
     vector: str | None = None        # v1 | v2 (fixed_vector)
@@ -103,6 +172,7 @@ class Support:
     angle: Signal | None = None                           # driven: rotation angle θ(t) (rad)
     direction: tuple[float, float, float] | None = None   # driven: translation direction (unit)
     distance: Signal | None = None                        # driven: translation s(t) (m)
+    edge: EdgeRef | None = None      # a shell edge instead of a node: clamp (Y, G) or ball (Y) on every node
 
 
 @dataclass(frozen=True)
@@ -180,6 +250,9 @@ class Output:
     member: str | None = None
     actuator: str | None = None
     nodes: tuple[str, ...] = ()
+    shell: str | None = None         # shell_point, shell_shape
+    at: Vec3 | None = None           # shell_point: reference position of a mesh node (m)
+    edge: EdgeRef | None = None      # shell_point: look for ``at`` on this edge only (coincident slit edges)
 
 
 @dataclass(frozen=True)
@@ -215,3 +288,6 @@ class Scene:
     outputs: tuple[Output, ...] = field(default_factory=tuple)
     commands: CommandProgramSpec | None = None
     joints: tuple[Joint, ...] = ()
+    shells: dict[str, Shell] = field(default_factory=dict)
+    shell_joints: tuple[ShellJoint, ...] = ()
+    edge_loads: tuple[EdgeLoad, ...] = ()
