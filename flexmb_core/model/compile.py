@@ -165,7 +165,7 @@ def compile_scene(scene: Scene) -> Model:
         compact_drafts(drafts, compact)
     unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
     if unused:
-        raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member")
+        raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member or shell")
 
     q0_arr = np.asarray(q0, dtype=float)
     nodes_xyz = np.asarray(node_x)
@@ -186,7 +186,7 @@ def compile_scene(scene: Scene) -> Model:
         if s.edge is not None:
             continue
         n = node_lookup[s.node]
-        if s.type == "clamp":
+        if s.type == "clamp" and s.member is None:      # a member's clamp leaves a hinged shell free
             for ids in clamp_node_gdofs(shells, n):
                 fixed[ids] = True
         if s.type in ("clamp", "ball", "driven"):

@@ -43,7 +43,7 @@ def edit(fn):
     (lambda d: d["supports"].append({"node": "tip", "type": "weld"}), "s.yaml:supports[1].type: expected one of"),
     (lambda d: d["loads"]["forces"]["f"].update(node="middle"), "s.yaml:loads.forces.f.node: unknown node 'middle'"),
     (lambda d: d["solver"].update(dt=0), "s.yaml:solver.dt: expected a positive number (s), got 0.0"),
-    (lambda d: d["nodes"].update(lonely=[5, 5, 5]), "s.yaml:nodes: node(s) ['lonely'] are not used by any member"),
+    (lambda d: d["nodes"].update(lonely=[5, 5, 5]), "s.yaml:nodes: node(s) ['lonely'] are not used by any member or shell"),
     (lambda d: d["members"]["beam"].update(actuator={"variant": "bar"}), "only members of kind 'actuator' take an 'actuator' block"),
     (lambda d: d["outputs"].update(x={"kind": "actuator_force", "actuator": "beam"}), "member 'beam' is not an actuator"),
 ])
