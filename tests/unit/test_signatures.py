@@ -12,13 +12,14 @@ import flexmb_core.kernels.constraints as constraints_mod
 import flexmb_core.kernels.frame3d as frame_mod
 import flexmb_core.kernels.moments as moments_mod
 import flexmb_core.kernels.scatter as scatter_mod
+import flexmb_core.kernels.shell as shell_mod
 import flexmb_core.kernels.truss as truss_mod
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod)
+MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod, shell_mod)
 
 
 def _kernels():
@@ -29,7 +30,8 @@ def _kernels():
 
 
 def test_each_kernel_compiles_one_signature():
-    for scene in ("cantilever_b1.yaml", "actuator_arm.yaml", "tendon_arm.yaml", "deployable_boom.yaml"):
+    for scene in ("cantilever_b1.yaml", "actuator_arm.yaml", "tendon_arm.yaml", "deployable_boom.yaml",
+                  "radiator_panels.yaml", "shell_roll_up.yaml"):
         model = compile_scene(load_scene(SCENES / scene, {"until": 0.02}))
         sim = Simulator(model)
         sim.warmup()
@@ -40,6 +42,8 @@ def test_each_kernel_compiles_one_signature():
     assert kernels, "no kernels found"
     used = {k: v for k, v in kernels.items() if v.signatures}
     assert "flexmb_core.kernels.frame3d.frame_group" in used
+    assert "flexmb_core.kernels.shell.shell_group" in used
+    assert "flexmb_core.kernels.constraints.director_tie_group" in used
     for name, disp in used.items():
         assert len(disp.signatures) == 1, f"{name} compiled {len(disp.signatures)} signatures: {disp.signatures}"
 
