@@ -95,3 +95,33 @@ def test_clamped_plate_frequency_meets_leissa_and_converges():
     coarse, fine = _square_plate("clamp", 4)[0], _square_plate("clamp", 6)[0]
     assert fine == pytest.approx(35.985, rel=0.01)                     # measured +0.46 %
     assert abs(fine - 35.985) < 0.5 * abs(coarse - 35.985)             # refinement closes in
+
+
+@pytest.mark.parametrize("direction, factor", [((0.0, 1.0, 0.0), math.pi / 4), ((1.0, 0.0, 0.0), 3 * math.pi / 4 - 2)])
+def test_quarter_cylinder_strip_bends_like_the_curved_beam(direction, factor):
+    """A quarter of a cylinder (R = 10, width 1 along the axis, h = 0.1, ν = 0) clamped along its
+    θ = 0 edge, a small force on its θ = 90° edge: the curved cantilever of Castigliano's theorem,
+    tip deflection along the force = factor · P R³/EI (π/4 for the force along y, 3π/4 − 2 along x),
+    axial and shear compliance being (h/R)² smaller. Also checks the generator's geometry."""
+    radius, width, h, e = 10.0, 1.0, 0.1, 1.0e7
+    ei = e * width * h ** 3 / 12
+    force = 1e-4 * ei / radius ** 2              # deflection ~1e-4 R: linear range
+    d = {"name": "arc", "materials": {"m": {"E": e, "nu": 0.0, "rho": 1.0}},
+         "shells": {"arc": {"mesh": {"kind": "cylinder", "center": [0, 0, 0], "axis": [0, 0, 1], "reference": [1, 0, 0],
+                                     "radius": radius, "length": width, "angles": [0.0, math.pi / 2],
+                                     "divisions": [2, 12]},
+                            "thickness": h, "material": "m"}},
+         "supports": [{"edge": "arc.start", "type": "clamp"}],
+         "loads": {"edge_forces": {"p": {"edge": "arc.end", "force_per_length": [force / width * c for c in direction]}}},
+         "solver": {"analysis": "static", "dt": 1.0, "until": 1.0},
+         "outputs": {"tip": {"kind": "shell_point", "shell": "arc", "at": [0.0, radius, 0.5]}}}
+    model = compile_scene(scene_from_dict(d))
+    info = model.shell("arc")
+    r = np.hypot(info.x0[:, 0], info.x0[:, 1])
+    assert np.allclose(r, radius, rtol=1e-14)                                  # nodes on the surface
+    assert np.allclose(info.normal0, -np.column_stack((info.x0[:, :2] / r[:, None], np.zeros(r.size))))
+    sim = Simulator(model)
+    sim.initialize()
+    sim.run(1.0)
+    u = np.array(sim.outputs()["tip"]["displacement"])
+    assert u @ np.array(direction) == pytest.approx(factor * force * radius ** 3 / ei, rel=0.01)
