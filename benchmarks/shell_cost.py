@@ -32,35 +32,50 @@ SCENES = ROOT / "scenes"
 OUT = ROOT / "docs" / "benchmarks"
 
 
-def stewart_case(label: str, scene: str, seconds: float, repeats: int, quadrature=None) -> dict:
-    """Median steps/s over ``repeats`` fresh runs of ``seconds`` simulated, and the last run's
-    tracking, leg forces and plate sag."""
-    walls = []
+def _stewart_model(scene: str, seconds: float, quadrature=None):
+    sc = load_scene(SCENES / scene, {"until": seconds})
+    if quadrature is not None:
+        import dataclasses
+        sc = dataclasses.replace(sc, shells={k: dataclasses.replace(v, quadrature=quadrature)
+                                             for k, v in sc.shells.items()})
+    return compile_scene(sc)
+
+
+def stewart_run(model, seconds: float) -> tuple[float, Simulator, PoseTracker]:
+    """One timed run (JIT warm-up excluded): wall time, the simulator and its pose tracker."""
+    sim = Simulator(model)
+    sim.warmup()
+    sim.initialize()
+    tracker = PoseTracker(model)
+    t0 = time.perf_counter()
+    sim.run(seconds, callback=lambda s, r: tracker.update(s.state.t, s.state.q))
+    return time.perf_counter() - t0, sim, tracker
+
+
+def stewart_cases(cases, seconds: float, repeats: int) -> list[dict]:
+    """Median steps/s per case, the repeats interleaved (A B C A B C …) so that a busy machine
+    slows every case alike; tracking, leg forces and plate sag from the last run."""
+    models = [_stewart_model(scene, seconds, quad) for _, scene, quad in cases]
+    walls = [[] for _ in cases]
+    last = [None] * len(cases)
     for _ in range(repeats):
-        sc = load_scene(SCENES / scene, {"until": seconds})
-        if quadrature is not None:
-            import dataclasses
-            shells = {k: dataclasses.replace(v, quadrature=quadrature) for k, v in sc.shells.items()}
-            sc = dataclasses.replace(sc, shells=shells)
-        model = compile_scene(sc)
-        sim = Simulator(model)
-        sim.warmup()
-        sim.initialize()
-        tracker = PoseTracker(model)
-        t0 = time.perf_counter()
-        sim.run(seconds, callback=lambda s, r: tracker.update(s.state.t, s.state.q))
-        walls.append(time.perf_counter() - t0)
-    steps = round(seconds / model.scene.solver.dt)
-    out = sim.outputs()
-    row = {"case": label, "scene": scene, "free_dofs": model.nfree, "steps": steps,
-           "wall_s": walls, "steps_per_s": steps / statistics.median(walls),
-           "rtf": seconds / statistics.median(walls),
-           "newton_iterations_mean": float(np.mean(sim.stats.iterations)),
-           "leg1_force_N": out["leg1_force"], "leg4_force_N": out["leg4_force"], **tracker.summary()}
-    if "plate_centre" in out:
-        corners = np.mean([sim.state.q[model.node_ydofs[model.node(n)]][2] for n in "ABC"])
-        row["plate_sag_m"] = float(corners - out["plate_centre"]["position"][2])
-    return row
+        for i, model in enumerate(models):
+            wall, sim, tracker = stewart_run(model, seconds)
+            walls[i].append(wall)
+            last[i] = (sim, tracker)
+    rows = []
+    for (label, scene, _), model, w, (sim, tracker) in zip(cases, models, walls, last):
+        steps = round(seconds / model.scene.solver.dt)
+        out = sim.outputs()
+        row = {"case": label, "scene": scene, "free_dofs": model.nfree, "steps": steps, "wall_s": w,
+               "steps_per_s": steps / statistics.median(w), "rtf": seconds / statistics.median(w),
+               "newton_iterations_mean": float(np.mean(sim.stats.iterations)),
+               "leg1_force_N": out["leg1_force"], "leg4_force_N": out["leg4_force"], **tracker.summary()}
+        if "plate_centre" in out:
+            corners = np.mean([sim.state.q[model.node_ydofs[model.node(n)]][2] for n in "ABC"])
+            row["plate_sag_m"] = float(corners - out["plate_centre"]["position"][2])
+        rows.append(row)
+    return rows
 
 
 def static_case(scene: str, outputs: tuple[str, ...]) -> tuple[dict, float]:
@@ -94,10 +109,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
 
-    stewart = [stewart_case("truss triangle (3 bars)", "stewart_platform_bars.yaml", args.seconds, args.repeats),
-               stewart_case("shell plate, 3×3 × 2 points", "stewart_platform_shell.yaml", args.seconds, args.repeats),
-               stewart_case("shell plate, 4×4 × 3 points", "stewart_platform_shell.yaml", args.seconds, args.repeats,
-                            quadrature=(4, 3))]
+    stewart = stewart_cases([("truss triangle (3 bars)", "stewart_platform_bars.yaml", None),
+                             ("shell plate, 3×3 × 2 points", "stewart_platform_shell.yaml", None),
+                             ("shell plate, 4×4 × 3 points", "stewart_platform_shell.yaml", (4, 3))],
+                            args.seconds, args.repeats)
     base = stewart[0]["steps_per_s"]
 
     strip, t_strip = static_case("shell_strip_shear.yaml", ("tip",))
@@ -137,7 +152,7 @@ def main() -> None:
         "other jobs may share the machine, so compare the ratios within this run).",
         "",
         f"## Stewart twin: rigid-triangle platform against a shell plate ({args.seconds:g} s of the appendix "
-        f"trajectory, Δt = 1 ms, median of {args.repeats} runs)",
+        f"trajectory, Δt = 1 ms, median of {args.repeats} interleaved runs)",
         "",
         "| platform | free DOFs | steps/s | RTF | cost vs truss | Newton it./step | max pose error (m) | "
         "max orientation error (rad) | leg1 / leg4 force at the end (N) | plate sag (mm) |",
