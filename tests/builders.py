@@ -49,3 +49,32 @@ def build(d, **solver_overrides):
     d.setdefault("solver", {}).update(solver_overrides)
     model = compile_scene(scene_from_dict(d, source="<test>"))
     return model, Simulator(model)
+
+
+def extended_tangent_error(model, sim, q, mult, lam=None, h: float = 1e-6) -> float:
+    """Largest entry of (system matrix − central finite difference of the system residual
+    [f_int + Gᵀλ; c] in q and λ), relative to the matrix's largest entry."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from flexmb_core.model.assembly import assemble
+    ws = sim.ws
+    lam = np.ones(0) if lam is None else lam
+
+    def system_residual(qq, mm):
+        assemble(model, ws, qq, lam, False, mm)
+        return np.concatenate((ws.r[model.free], ws.rc))
+
+    assemble(model, ws, q, lam, True, mult)
+    k = sp.csr_matrix((ws.kdata.copy(), model.indices, model.indptr), shape=(model.nsys,) * 2).toarray()
+    kfd = np.zeros_like(k)
+    for j in range(model.nsys):
+        qp, qm, mp, mm = q.copy(), q.copy(), mult.copy(), mult.copy()
+        if j < model.nfree:
+            qp[model.free[j]] += h
+            qm[model.free[j]] -= h
+        else:
+            mp[j - model.nfree] += h
+            mm[j - model.nfree] -= h
+        kfd[:, j] = (system_residual(qp, mp) - system_residual(qm, mm)) / (2 * h)
+    return float(np.abs(k - kfd).max() / np.abs(k).max())
