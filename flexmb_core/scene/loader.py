@@ -399,7 +399,6 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
         initial_state=n.get("initial_state", d.initial_state).string(("rest", "static")),
         on_unconverged=n.get("on_unconverged", d.on_unconverged).string(("substep", "stop", "accept_flagged")),
         max_substep_levels=n.get("max_substep_levels", d.max_substep_levels).integer(lo=0, hi=12),
-        static_steps=n.get("static_steps", d.static_steps).integer(lo=1, hi=100000),
         newton=n.get("newton", d.newton).string(("full", "modified")),
         modified_contraction=n.get("modified_contraction", d.modified_contraction).number(positive=True, hi=0.9),
         tangent_max_age=n.get("tangent_max_age", d.tangent_max_age).integer(lo=1, hi=10**9),

@@ -225,7 +225,7 @@ class Gravity:
 class SolverSpec:
     analysis: str = "dynamic"        # dynamic | static
     integrator: str = "generalized_alpha"   # Arnold–Brüls (default) | newmark | chung_hulbert
-    dt: float = 1e-3
+    dt: float = 1e-3                 # time step (s); in statics the load (pseudo-time) increment
     until: float = 1.0
     beta: float = 0.25
     gamma: float = 0.5
@@ -236,7 +236,6 @@ class SolverSpec:
     initial_state: str = "rest"                # rest (reference geometry) | static (equilibrium at t0)
     on_unconverged: str = "substep"            # substep | stop | accept_flagged
     max_substep_levels: int = 4
-    static_steps: int = 10
     newton: str = "full"                       # full | modified (tangent reuse)
     modified_contraction: float = 0.25         # refresh when |Δq_k| > this · |Δq_k−1|
     tangent_max_age: int = 100                 # steps a held tangent may serve
