@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..kernels.shell import NDOF_NODE, SMAT_H, SMAT_LAMBDA, SMAT_MU, N_SMAT
+from ..kernels.shell import N_SMAT, SMAT_H, SMAT_LAMBDA, SMAT_MU
 from ..scene.schema import Scene, Shell
 from . import shell_mesh
 from .model import ShellGroup, ShellInfo
@@ -159,7 +159,7 @@ def build_shell_groups(scene: Scene, infos: tuple[ShellInfo, ...], scatter_map,
                                                where)
             except ValueError as exc:
                 raise SceneError(where, str(exc).split(": ", 1)[1]) from None
-            edofs = np.concatenate([np.concatenate((info.ydofs[k], info.gdofs[k], [info.adofs[k]])) for k in tri])
+            edofs = element_dofs(info, tri)
             b["edofs"].append(edofs)
             b["a0inv"].append(a0inv)
             b["w"].append(w)
@@ -185,12 +185,12 @@ def build_shell_groups(scene: Scene, infos: tuple[ShellInfo, ...], scatter_map,
 
 def shell_element_pairs(infos: tuple[ShellInfo, ...]) -> list[np.ndarray]:
     """Element DOF lists of every shell element (for the sparsity pattern), before the groups exist."""
-    out = []
-    for info in infos:
-        for tri in info.tri:
-            out.append(np.concatenate([np.concatenate((info.ydofs[k], info.gdofs[k], [info.adofs[k]]))
-                                       for k in tri]))
-    return out
+    return [element_dofs(info, tri) for info in infos for tri in info.tri]
+
+
+def element_dofs(info: ShellInfo, tri: np.ndarray) -> np.ndarray:
+    """Global ids of one element's 70 unknowns, [Y, G, a] node by node (the kernel's order)."""
+    return np.column_stack((info.ydofs[tri], info.gdofs[tri], info.adofs[tri])).ravel()
 
 
 def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.ndarray]:
