@@ -12,6 +12,7 @@ from flexmb_core.report import TwinSample
 
 from . import messages as M
 from .convert import message_class
+from .shells import ShellShapes
 from .topics import WORLD_FRAME
 
 
@@ -115,31 +116,41 @@ class LiveMessages:
         m.rejected_commands = int(timing.rejected_commands)
         return m
 
-    def make_shape(self, s: TwinSample, member_kinds) -> None:
+    def make_shape(self, s: TwinSample, member_kinds, shells: ShellShapes | None = None) -> None:
+        """The MarkerArray of :func:`ros2_node.messages.shape`, built once: every marker and point
+        object exists from here on and :meth:`fill_shape` only writes numbers into them."""
         MarkerArray = message_class("visualization_msgs/msg/MarkerArray")
         Marker = message_class("visualization_msgs/msg/Marker")
         Point = message_class("geometry_msgs/msg/Point")
-        template = M.shape(s, member_kinds)["markers"]
+        template = M.shape(s, member_kinds, shells)["markers"]
         self.shape_msg = MarkerArray()
         markers = []
-        for d, pts in zip(template, s.member_points):
+        for d in template:
             mk = Marker()
             mk.header.frame_id = WORLD_FRAME
             mk.ns, mk.id, mk.type, mk.action = d["ns"], d["id"], d["type"], d["action"]
             mk.pose.orientation.w = 1.0
-            mk.scale.x = d["scale"]["x"]
+            mk.scale.x, mk.scale.y, mk.scale.z = d["scale"]["x"], d["scale"]["y"], d["scale"]["z"]
             c = d["color"]
             mk.color.r, mk.color.g, mk.color.b, mk.color.a = c["r"], c["g"], c["b"], c["a"]
-            mk.points = [Point() for _ in range(pts.shape[0])]
+            mk.points = [Point() for _ in range(len(d["points"]))]
             markers.append(mk)
         self.shape_msg.markers = markers
+        self._member_markers = markers[:len(s.member_points)]
+        self._shell_markers = markers[len(s.member_points):]
 
-    def fill_shape(self, s: TwinSample, member_kinds):
+    def fill_shape(self, s: TwinSample, member_kinds, shells: ShellShapes | None = None):
+        """``~/shape`` at the sample's state (``shells`` read at the same state, as for
+        :func:`ros2_node.messages.shape`)."""
         if not hasattr(self, "shape_msg"):
-            self.make_shape(s, member_kinds)
-        for mk, pts in zip(self.shape_msg.markers, s.member_points):
+            self.make_shape(s, member_kinds, shells)
+        for mk, pts in zip(self._member_markers, s.member_points):
             _set_stamp(mk.header.stamp, s.t)
             for pt, (x, y, z) in zip(mk.points, pts.tolist()):
+                pt.x, pt.y, pt.z = x, y, z
+        for i, mk in enumerate(self._shell_markers):
+            _set_stamp(mk.header.stamp, s.t)
+            for pt, (x, y, z) in zip(mk.points, shells.vertices(i).tolist()):
                 pt.x, pt.y, pt.z = x, y, z
         return self.shape_msg
 

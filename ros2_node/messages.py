@@ -14,13 +14,16 @@ import numpy as np
 
 from flexmb_core.report import TwinSample
 
+from .shells import ShellShapes
 from .topics import WORLD_FRAME
 
 MARKER_LINE_STRIP = 4
+MARKER_TRIANGLE_LIST = 11
 MARKER_ADD = 0
-# member colours by kind (RViz markers and the rerun view use the same)
+# member colours by kind, and the shells' (RViz markers and the rerun view use the same)
 MEMBER_RGBA = {"actuator": (0.95, 0.55, 0.10, 1.0), "frame": (0.35, 0.55, 0.85, 1.0),
-                "truss": (0.55, 0.75, 0.40, 1.0)}
+                "truss": (0.55, 0.75, 0.40, 1.0), "shell": (0.78, 0.80, 0.86, 1.0)}
+SHELL_RGBA = MEMBER_RGBA["shell"]
 
 
 def stamp(t: float) -> dict:
@@ -79,8 +82,15 @@ def tf(s: TwinSample) -> dict:
     return {"transforms": out}
 
 
-def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None) -> dict:
-    """``visualization_msgs/MarkerArray``: one LINE_STRIP per member through its nodes."""
+def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: ShellShapes | None = None) -> dict:
+    """``visualization_msgs/MarkerArray``: one LINE_STRIP per member through its nodes, then one
+    TRIANGLE_LIST per shell (ns = name, id = position in the array).
+
+    ``shells`` must have been read at the sample's state (:meth:`ShellShapes.read`, which
+    :meth:`ros2_node.twin.TwinRunner.sample` does); a shell's marker lists 3 points per flat
+    triangle (:func:`ros2_node.shells.shell_triangles`: 9 per cubic element), all in the marker's
+    colour, with unit scale (RViz scales triangle-list points by it).
+    """
     markers = []
     for k, (name, pts) in enumerate(zip(s.member_names, s.member_points)):
         r, g, b, a = MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", MEMBER_RGBA["frame"])
@@ -91,6 +101,16 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None) -> dict:
             "color": {"r": r, "g": g, "b": b, "a": a},
             "points": [{"x": float(x), "y": float(y), "z": float(z)} for x, y, z in pts],
         })
+    if shells is not None:
+        r, g, b, a = SHELL_RGBA
+        for i, name in enumerate(shells.names):
+            markers.append({
+                "header": header(s.t), "ns": name, "id": len(markers), "type": MARKER_TRIANGLE_LIST,
+                "action": MARKER_ADD, "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),
+                "scale": {"x": 1.0, "y": 1.0, "z": 1.0},
+                "color": {"r": r, "g": g, "b": b, "a": a},
+                "points": [{"x": x, "y": y, "z": z} for x, y, z in shells.vertices(i).tolist()],
+            })
     return {"markers": markers}
 
 

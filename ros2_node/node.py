@@ -316,11 +316,11 @@ class TwinNode:
                 self._out(T.CLOCK, live.fill_clock(t), lambda: M.clock(t), t)
             self._published += 1
         if shape_due:
-            kinds = self.runner.member_kinds
-            self._out(T.SHAPE, live.fill_shape(s, kinds), lambda: M.shape(s, kinds), t)
+            kinds, shells = self.runner.member_kinds, self.runner.shells
+            self._out(T.SHAPE, live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells), t)
             if self.rerun is not None:
                 self.rerun.log_sample(s, {"step_wall_time": self._last_step_wall, "real_time_factor": self._rtf(),
-                                          "message": outcome_message})
+                                          "message": outcome_message}, shells)
 
     # -- stepping -------------------------------------------------------------------------------------
     def _step(self) -> None:

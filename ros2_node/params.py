@@ -32,7 +32,7 @@ SPECS: tuple[ParamSpec, ...] = (
               "('' = the scene's)", choices=("", "newmark", "generalized_alpha", "chung_hulbert")),
     ParamSpec("publish_rate", 500.0, "rate (Hz of simulated time) of /joint_states, actuator states, pose, "
               "status, /clock", low=1.0, high=10000.0, read_only=False),
-    ParamSpec("shape_rate", 30.0, "rate (Hz) of ~/shape (member polylines); 0 disables", low=0.0,
+    ParamSpec("shape_rate", 30.0, "rate (Hz) of ~/shape (member polylines, shell triangles); 0 disables", low=0.0,
               high=1000.0, read_only=False),
     ParamSpec("publish_on_command", True, "also publish joint states and status right after the first step "
               "that uses a new command (low command→state latency at any publish_rate)", read_only=False),

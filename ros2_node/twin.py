@@ -23,6 +23,7 @@ from flexmb_core.simulator import Simulator
 
 from .commands import CommandSchedule, Rejection
 from .messages import stamp_seconds
+from .shells import ShellShapes
 
 
 @dataclass
@@ -89,6 +90,9 @@ class TwinRunner:
         self.schedule: CommandSchedule | None = None
         self._backup = None
         self._member_kinds = tuple(m.kind for m in model.members)
+        # the sample (flexmb_core.report) carries the members; the shells' nodes are gathered here,
+        # at the same state, for ~/shape and the rerun view
+        self.shells = ShellShapes(model)
 
     @property
     def member_kinds(self) -> tuple[str, ...]:
@@ -112,7 +116,7 @@ class TwinRunner:
             self.sim.set_commands(rest)
         self.sim.initialize()
         self._backup = self.sim.state.copy()
-        return self.reporter.read(self.sim)
+        return self.sample()
 
     # -- inputs (return None when accepted) ----------------------------------------------------
     def _count(self, r: Rejection | None) -> Rejection | None:
@@ -180,8 +184,11 @@ class TwinRunner:
 
     def sample(self, full: bool = True) -> TwinSample:
         """The current state as a :class:`TwinSample` (the same object every call); see
-        :meth:`TwinReporter.read` for ``full``."""
-        return self.reporter.read(self.sim, full)
+        :meth:`TwinReporter.read` for ``full``. A full sample also refreshes :attr:`shells`."""
+        s = self.reporter.read(self.sim, full)
+        if full:
+            self.shells.read(self.sim.state.q)
+        return s
 
 
 def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:

@@ -10,6 +10,7 @@ import numpy as np
 from flexmb_core.report import TwinSample
 
 from .. import messages as M
+from ..shells import ShellShapes
 from .tolerances import RELATIVE
 
 
@@ -118,17 +119,25 @@ class Comparison:
             self._pose(topic, "transform ", tr.transform.translation, tr.transform.rotation, p.position,
                        p.orientation_wxyz, p.name, t)
 
-    def shape(self, topic: str, rec, s: TwinSample, t: float) -> None:
-        by_name = dict(zip(s.member_names, s.member_points))
+    def shape(self, topic: str, rec, s: TwinSample, t: float, shells: ShellShapes | None = None) -> None:
+        """Every recorded marker against the replay: a LINE_STRIP's points against its member's
+        nodes, a TRIANGLE_LIST's against its shell's triangle vertices (``shells`` read at the
+        sample's state), by ``ns``; one field ``points`` (m, the largest point distance)."""
+        strips = dict(zip(s.member_names, s.member_points))
+        shell_index = {} if shells is None else {name: i for i, name in enumerate(shells.names)}
         st = self.stat(topic, "points", "position")
         for mk in rec.markers:
-            pts = by_name.get(mk.ns)
+            if mk.type == M.MARKER_TRIANGLE_LIST:
+                i = shell_index.get(mk.ns)
+                pts, what = (None if i is None else shells.vertices(i)), "shell"
+            else:
+                pts, what = strips.get(mk.ns), "member"
             if pts is None:
-                self.mismatch(f"{topic} t = {t:.9g} s: marker ns {mk.ns!r} is not a member of the replay")
+                self.mismatch(f"{topic} t = {t:.9g} s: marker ns {mk.ns!r} is not a {what} of the replay")
                 continue
             got = np.array([[q.x, q.y, q.z] for q in mk.points]).reshape(-1, 3)
             if got.shape != pts.shape:
-                self.mismatch(f"{topic} t = {t:.9g} s: member {mk.ns} has {len(got)} points, replay {len(pts)}")
+                self.mismatch(f"{topic} t = {t:.9g} s: {what} {mk.ns} has {len(got)} points, replay {len(pts)}")
                 continue
             st.add(float(np.sqrt(((got - pts) ** 2).sum(axis=1)).max()) if len(got) else 0.0, t, mk.ns)
 

@@ -339,7 +339,7 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
             elif typ == "tf2_msgs/msg/TFMessage":
                 cmp.tf(topic, rec, s, t)
             elif typ == "visualization_msgs/msg/MarkerArray":
-                cmp.shape(topic, rec, s, t)
+                cmp.shape(topic, rec, s, t, runner.shells)
             elif typ == "flexmb_msgs/msg/TwinStatus":
                 cmp.status(topic, rec, s, t)
             elif typ == "rosgraph_msgs/msg/Clock":

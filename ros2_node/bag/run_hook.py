@@ -100,6 +100,8 @@ class McapRunHook:
         from flexmb_core.errors import FlexmbError
         from flexmb_core.report import TwinReporter
 
+        from ..shells import ShellShapes
+
         if not (record_rate > 0 and math.isfinite(record_rate)):
             raise FlexmbError(f"--record-rate must be a positive number of Hz, got {record_rate}")
         self.model = model
@@ -111,6 +113,7 @@ class McapRunHook:
                                                           shape_rate=shape_rate, node_name=node_name))
         self.reporter = TwinReporter(model)
         self.kinds = tuple(m.kind for m in model.members)
+        self.shells = ShellShapes(model)
         self.l0 = model.actuators.l0
         self._lengths = np.zeros_like(self.l0)
         n = node_name
@@ -186,7 +189,8 @@ class McapRunHook:
             self._logged_t = t
             self._outputs.mark(t)
         if shape and self._shape_t != t:
-            rec.write(self.t_shape, T.SHAPE.type, M.shape(s, self.kinds), t)
+            self.shells.read(sim.state.q)
+            rec.write(self.t_shape, T.SHAPE.type, M.shape(s, self.kinds, self.shells), t)
             self._shape_t = t
             self._shapes.mark(t)
 

@@ -15,6 +15,7 @@ WORLD = "world"
 AXES = "world/axes"
 SUPPORTS = "world/supports"
 MEMBERS = "world/members"            # + /<member name> (a name "a/b" nests as a/b)
+SHELLS = "world/shells"              # + /<shell name>: Mesh3D (triangles static, vertex positions per time)
 PLATFORMS = "world/platforms"        # + /<platform>/frame (pose), /mesh and /outline (world coordinates)
 
 ACT_LENGTH = "plots/actuators/length"

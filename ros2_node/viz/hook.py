@@ -27,11 +27,13 @@ class RerunRunHook:
     def __init__(self, model, path: str, period: float = DEFAULT_PERIOD):
         from flexmb_core.report import TwinReporter
 
+        from ..shells import ShellShapes
         from .rerun_log import TwinRerunLogger
 
         self.path = str(path)
         self.period = float(period)
         self.reporter = TwinReporter(model)
+        self.shells = ShellShapes(model)
         self.logger = TwinRerunLogger(model, rrd_path=self.path)
         self._next = 0.0
         self._t_last = 0.0             # sim time of the last logged state (s)
@@ -69,7 +71,9 @@ class RerunRunHook:
             status["step_wall_time"] = step_wall
         if wall > self._wall_last and t > self._t_last:
             status["real_time_factor"] = (t - self._t_last) / (wall - self._wall_last)
-        self.logger.log_sample(self.reporter.read(sim), status)
+        sample = self.reporter.read(sim)
+        self.shells.read(sim.state.q)
+        self.logger.log_sample(sample, status, self.shells)
         self._t_last, self._wall_last, self._logged_t = t, wall, t
         if self.period > 0:
             # next multiple of the period after t (a product, not a running sum: no drift)

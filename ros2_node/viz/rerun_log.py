@@ -3,7 +3,8 @@
 One logger serves a live node, ``flexmb run --rrd`` and ``flexmb view`` (a recording): samples
 (:class:`~flexmb_core.report.TwinSample`) go through :meth:`TwinRerunLogger.log_sample`, recorded
 messages through the per-topic methods it is made of (:meth:`~TwinRerunLogger.log_members`,
-:meth:`~TwinRerunLogger.log_actuators`, :meth:`~TwinRerunLogger.log_pose`, ...), so both produce
+:meth:`~TwinRerunLogger.log_shells`, :meth:`~TwinRerunLogger.log_actuators`,
+:meth:`~TwinRerunLogger.log_pose`, ...), so both produce
 the same entities (see :mod:`ros2_node.viz.blueprint`) on the timeline ``sim_time``.
 
 Rows are buffered per entity and sent with ``send_columns`` every ``flush_rows`` rows: in rerun
@@ -110,17 +111,20 @@ class TwinRerunLogger:
         self.recording.send_blueprint(bp.build_blueprint(self.layout), make_active=True, make_default=True)
 
     # -- one reported state ------------------------------------------------------------------
-    def log_sample(self, sample, status: dict | None = None) -> None:
+    def log_sample(self, sample, status: dict | None = None, shells=None) -> None:
         """Log a :class:`~flexmb_core.report.TwinSample` at ``sample.t`` (s) on ``sim_time``.
 
         ``status`` adds what the sample does not know: ``step_wall_time`` (s), ``real_time_factor``
-        and ``message`` (overrides the solver's), as in ``flexmb_msgs/TwinStatus``.
+        and ``message`` (overrides the solver's), as in ``flexmb_msgs/TwinStatus``. ``shells``
+        (:class:`~ros2_node.shells.ShellShapes`, read at the sample's state) adds the shells.
         """
         if not self._static_done:
             self.log_static()
         st = status or {}
         t = sample.t
         self.log_members(t, sample.member_names, sample.member_points, sample.member_widths)
+        if shells is not None and len(shells):
+            self.log_shells(t, shells.names, shells.points, shells.triangles)
         if sample.actuator_names:
             self.log_actuators(t, sample.actuator_names, sample.actuator_lengths, sample.actuator_velocities,
                                sample.actuator_commands, sample.actuator_forces)
@@ -154,6 +158,46 @@ class TwinRerunLogger:
             if p.locators and all(i in index for i, _ in p.locators):
                 corners = np.array([points[index[i]][j] for i, j in p.locators], dtype=np.float64)
                 self._log_platform_shape(p.name, ns, corners)
+        self._maybe_flush()
+
+    def log_shells(self, t: float, names, points, triangles=None, colors=None) -> None:
+        """Deformed shells as meshes ``world/shells/<name>``: triangle indices static, vertex
+        positions at ``t`` (s).
+
+        Parameters
+        ----------
+        names : sequence of str
+        points : sequence of (n_k, 3) arrays
+            Shell ``names[k]``'s node positions (m) with ``triangles``; without them, a triangle
+            list (3 points per triangle: a TRIANGLE_LIST marker's points).
+        triangles : sequence of (nt_k, 3) int arrays, optional
+            Node indices of each flat triangle (:func:`ros2_node.shells.shell_triangles`).
+        colors : sequence of RGBA in [0, 1], optional
+            Default: the layout's (the shell colour).
+
+        Notes
+        -----
+        A triangle list whose shell the layout knows from a model (same triangle count) is folded
+        back onto the mesh nodes, so a recording viewed with its scene logs the same entity as the
+        live run; otherwise each triplet of points is one triangle.
+        """
+        rr, lay, ns = self._rr, self.layout, _ns(t)
+        for k, name in enumerate(names):
+            shell = lay.shell(name, None if colors is None else colors[k])
+            pts = np.asarray(points[k], dtype=np.float64).reshape(-1, 3)
+            if triangles is not None:
+                tri, row = triangles[k], pts.copy()                  # the sample's buffers are reused
+            elif (shell.triangles is not None and shell.first is not None
+                  and 3 * shell.triangles.shape[0] == pts.shape[0]):
+                tri, row = shell.triangles, pts[shell.first]          # a gather: already a copy
+            else:
+                tri, row = np.arange(pts.shape[0] - pts.shape[0] % 3).reshape(-1, 3), pts.copy()
+            path = self._entity(bp.SHELLS, name)
+            color = shell.color
+            self._style(path, (tri.shape, row.shape, color), lambda tri=tri, c=color: rr.Mesh3D.from_fields(
+                triangle_indices=np.asarray(tri, dtype=np.uint32), albedo_factor=rgba8(c),
+                face_rendering="DoubleSided"))
+            self._push(path, _MESH, ns, row)
         self._maybe_flush()
 
     def log_actuators(self, t: float, names, lengths, velocities=None, commands=None, forces=None) -> None:

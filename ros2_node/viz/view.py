@@ -3,7 +3,8 @@
 Each recorded topic maps to one logger method, at the message's header stamp (simulated time):
 
 ===================================  =====================================================
-``.../shape`` MarkerArray            deformed members (LINE_STRIP per member, ns = name)
+``.../shape`` MarkerArray            deformed members (LINE_STRIP per member, ns = name) and
+                                     shells (TRIANGLE_LIST per shell → a mesh)
 ``.../actuator_states``              actuator lengths, rates, commanded lengths, forces
 ``/joint_states``                    passive joints (and actuators when no ActuatorState)
 ``...platform_pose`` PoseStamped     platform poses (``/tf`` only when no pose topic)
@@ -12,7 +13,8 @@ command inputs                       commanded lengths as received (``plots/actu
 ===================================  =====================================================
 
 The geometry comes from the markers alone; the ``scene.yaml`` attachment, when present, adds the
-member kinds, supports, platform outlines and the camera.
+member kinds, the shells' mesh connectivity (their triangle lists fold back onto the mesh nodes),
+supports, platform outlines and the camera.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import numpy as np
 from .layout import TwinLayout
 from .. import topics as T
 from ..bag.recorder import METADATA_NAME
-from ..messages import MARKER_ADD, MARKER_LINE_STRIP
+from ..messages import MARKER_ADD, MARKER_LINE_STRIP, MARKER_TRIANGLE_LIST
 from .recording import Recording
 
 # message types by the topic contract (ros2_node.topics)
@@ -79,24 +81,46 @@ def _quat_rotate(wxyz: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return pts @ rot.T
 
 
+def _marker_points(m) -> np.ndarray:
+    """A marker's points (n, 3) in the world: through its pose (the twin leaves it at identity)."""
+    pts = np.array([[p.x, p.y, p.z] for p in m.points], dtype=np.float64).reshape(-1, 3)
+    o, p = m.pose.orientation, m.pose.position
+    q = np.array([o.w, o.x, o.y, o.z])
+    if np.linalg.norm(q) > 0 and not np.allclose(q, [1.0, 0.0, 0.0, 0.0]):
+        pts = _quat_rotate(q / np.linalg.norm(q), pts)
+    pts += np.array([p.x, p.y, p.z])
+    return pts
+
+
+def _marker_rgba(m) -> tuple:
+    return (m.color.r, m.color.g, m.color.b, m.color.a if m.color.a > 0 else 1.0)
+
+
 def markers_to_members(msg) -> tuple[list[str], list[np.ndarray], list[float], list[tuple]]:
-    """Names, points (m_k, 3), widths and colours of the LINE_STRIP markers of a MarkerArray
-    (points taken through each marker's pose, which the twin leaves at identity)."""
+    """Names, points (m_k, 3), widths and colours of the LINE_STRIP markers of a MarkerArray."""
     names, points, widths, colors = [], [], [], []
     for m in msg.markers:
         if m.type != MARKER_LINE_STRIP or m.action != MARKER_ADD or not m.points:
             continue
-        pts = np.array([[p.x, p.y, p.z] for p in m.points], dtype=np.float64)
-        o, p = m.pose.orientation, m.pose.position
-        q = np.array([o.w, o.x, o.y, o.z])
-        if np.linalg.norm(q) > 0 and not np.allclose(q, [1.0, 0.0, 0.0, 0.0]):
-            pts = _quat_rotate(q / np.linalg.norm(q), pts)
-        pts += np.array([p.x, p.y, p.z])
         names.append(m.ns or f"marker{m.id}")
-        points.append(pts)
+        points.append(_marker_points(m))
         widths.append(float(m.scale.x))
-        colors.append((m.color.r, m.color.g, m.color.b, m.color.a if m.color.a > 0 else 1.0))
+        colors.append(_marker_rgba(m))
     return names, points, widths, colors
+
+
+def markers_to_shells(msg) -> tuple[list[str], list[np.ndarray], list[tuple]]:
+    """Names, triangle-list points (3 nt_k, 3) (three per triangle, through the marker's pose;
+    RViz's per-marker scale is not applied: the twin writes 1) and colours of the TRIANGLE_LIST
+    markers of a MarkerArray."""
+    names, points, colors = [], [], []
+    for m in msg.markers:
+        if m.type != MARKER_TRIANGLE_LIST or m.action != MARKER_ADD or len(m.points) < 3:
+            continue
+        names.append(m.ns or f"marker{m.id}")
+        points.append(_marker_points(m))
+        colors.append(_marker_rgba(m))
+    return names, points, colors
 
 
 class _Router:
@@ -201,7 +225,7 @@ def _prime(rec: Recording, channels: dict[str, str], layout: TwinLayout) -> None
     seen: set[str] = set()
     for m in rec.messages(topics=set(wanted)) if wanted else ():
         if m.type == T_SHAPE and T_SHAPE not in seen:
-            for pts in markers_to_members(m.msg)[1]:
+            for pts in markers_to_members(m.msg)[1] + markers_to_shells(m.msg)[1]:
                 layout.include_points(pts)
         elif m.type == T_ACTUATOR_STATE and T_ACTUATOR_STATE not in seen:
             layout.actuator_names.extend(n for n in m.msg.names if n not in layout.actuator_names)
@@ -217,6 +241,9 @@ def _dispatch(logger, router: _Router, m, t: float) -> bool:
         names, pts, widths, colors = markers_to_members(msg)
         # colours from the markers only when no scene says the member kinds
         logger.log_members(t, names, pts, widths, None if logger.layout.from_scene else colors)
+        names, pts, colors = markers_to_shells(msg)
+        if names:
+            logger.log_shells(t, names, pts, None, None if logger.layout.from_scene else colors)
     elif typ == T_ACTUATOR_STATE:
         logger.log_actuators(t, msg.names, msg.lengths, msg.velocities, msg.commanded_lengths, msg.axial_forces)
     elif typ == T_JOINT_STATE:

@@ -26,6 +26,8 @@ SERIES = ["plots/actuators/length", "plots/actuators/command", "plots/actuators/
 PLATFORM = ["world/platforms/platform/frame", "world/platforms/platform/mesh",
             "world/platforms/platform/outline"]
 ORANGE = (242, 140, 26)          # actuator colour (ros2_node.messages), as 8-bit RGB
+RADIATOR = ROOT / "scenes" / "radiator_panels.yaml"     # two shells of 4 cubic triangles (28 nodes)
+SHELLS = ["world/shells/panel1", "world/shells/panel2"]
 
 try:
     import rerun  # noqa: F401
@@ -52,6 +54,7 @@ class Rrd:
         self.blueprints = reader.blueprints()
         self.times: dict[str, set[int]] = defaultdict(set)
         self.static: dict[str, set[str]] = defaultdict(set)
+        self.static_values: dict[str, dict] = defaultdict(dict)      # entity → component → last value
         self._rows: dict[str, list[tuple[int, dict]]] = defaultdict(list)
         for chunk in reader.stream():
             path_ = chunk.entity_path.strip("/")
@@ -59,6 +62,8 @@ class Rrd:
             comps = [n for n in rb.schema.names if ":" in n]
             if chunk.is_static:
                 self.static[path_].update(comps)
+                for c in comps:
+                    self.static_values[path_][c] = rb.column(c).to_pylist()[-1]
                 continue
             ts = rb.column("sim_time").cast(pa.int64()).to_pylist()
             cols = {c: rb.column(c).to_pylist() for c in comps}
@@ -75,6 +80,22 @@ def _grid_ns(times_s) -> set[int]:
     return {int(round(t * 1e9)) for t in times_s}
 
 
+def _rgba_u32(rgba) -> int:
+    """RGBA in [0, 1] → rerun's packed 0xRRGGBBAA."""
+    from ros2_node.viz.layout import rgba8
+
+    r, g, b, a = rgba8(rgba)
+    return (r << 24) | (g << 16) | (b << 8) | a
+
+
+def _radiator_triangles() -> list[np.ndarray]:
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.scene import load_scene
+    from ros2_node.shells import shell_triangles
+
+    return [shell_triangles(info.tri) for info in compile_scene(load_scene(RADIATOR)).shells]
+
+
 # --- fixtures ---------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
@@ -83,6 +104,15 @@ def recording(tmp_path_factory):
     from twin_recording import write_recording
 
     return write_recording(SCENE, tmp_path_factory.mktemp("rec") / "stewart.mcap", until=0.2)
+
+
+@pytest.fixture(scope="module")
+def shell_recording(tmp_path_factory):
+    """The radiator panels (two shells, nine members), every 5 ms step to 0.05 s, scene attached."""
+    pytest.importorskip("mcap_ros2")
+    from twin_recording import write_recording
+
+    return write_recording(RADIATOR, tmp_path_factory.mktemp("shells") / "radiator.mcap", until=0.05)
 
 
 @pytest.fixture(scope="module")
@@ -258,6 +288,106 @@ def test_view_reads_a_file_cut_short(recording, tmp_path):
     n = report.messages["/flexmb_twin/shape"]
     assert 0 < n < 201
     assert len(Rrd(tmp_path / "cut.rrd").times["world/members/leg1"]) == n
+
+
+# --- shells --------------------------------------------------------------------------------------
+@needs_rerun
+def test_run_rrd_logs_each_shell_as_a_mesh(tmp_path, shell_recording):
+    """``flexmb run --rrd``: one Mesh3D per shell, its 9 flat triangles per element static, the
+    node positions every 10 ms, in the shell colour."""
+    from ros2_node.messages import SHELL_RGBA
+
+    rrd = tmp_path / "radiator.rrd"
+    p = flexmb("run", RADIATOR, "--until", "0.05", "--rrd", rrd, "--quiet")
+    assert p.returncode == 0, p.stderr
+    data = Rrd(rrd)
+    for entity, tri, name in zip(SHELLS, _radiator_triangles(), ("panel1", "panel2")):
+        assert data.times[entity] == _grid_ns(0.01 * k for k in range(6)), entity
+        assert data.times[entity] == data.times["world/members/mast"]
+        static = data.static_values[entity]
+        assert np.array_equal(np.array(static["Mesh3D:triangle_indices"]), tri) and tri.shape == (36, 3)
+        assert static["Mesh3D:albedo_factor"] == [_rgba_u32(SHELL_RGBA)]
+        last = np.array(data.last(entity, "Mesh3D:vertex_positions"))
+        assert last.shape == (28, 3)
+        # the final state of this run is the recording's (the same scene and steps), to float32
+        assert np.allclose(last, shell_recording["shell_nodes"][name], rtol=0, atol=1e-6)
+
+
+@needs_rerun
+def test_view_folds_the_triangle_lists_back_onto_the_shell_nodes(shell_recording, tmp_path):
+    """``flexmb view`` of a bag with its scene: the TRIANGLE_LIST markers become the same meshes
+    as a live run logs (28 nodes, the model's triangles), at every recorded stamp."""
+    rrd = tmp_path / "view.rrd"
+    p = flexmb("view", shell_recording["path"], "--rrd", rrd)
+    assert p.returncode == 0, p.stderr
+    assert "scene 'radiator_panels'" in p.stdout
+    data = Rrd(rrd)
+    expected = _grid_ns(shell_recording["times"])
+    assert len(expected) == 11
+    for entity, tri, name in zip(SHELLS, _radiator_triangles(), ("panel1", "panel2")):
+        assert data.times[entity] == expected, entity
+        assert np.array_equal(np.array(data.static_values[entity]["Mesh3D:triangle_indices"]), tri)
+        last = np.array(data.last(entity, "Mesh3D:vertex_positions"), dtype=np.float32)
+        assert np.array_equal(last, shell_recording["shell_nodes"][name].astype(np.float32)), name
+    for m in ("mast", "post0", "deploy1", "fold0"):
+        assert data.times[f"world/members/{m}"] == expected, m
+
+
+@needs_rerun
+def test_view_without_scene_draws_each_triangle_list_as_is(tmp_path):
+    """No scene: the mesh is the marker's triangle list (3 vertices a triangle), in the marker's
+    colour, and the camera's bounds take in the shells."""
+    from ros2_node.messages import SHELL_RGBA
+    from ros2_node.viz.view import view_recording
+    from twin_recording import write_recording
+
+    rec = write_recording(RADIATOR, tmp_path / "bare.mcap", until=0.01, attach_scene=False)
+    rrd = tmp_path / "bare.rrd"
+    report = view_recording(rec["path"], rrd_path=str(rrd))
+    assert report.scene is None and report.messages["/flexmb_twin/shape"] == 3
+    lo, hi = report.layout.bounds
+    data = Rrd(rrd)
+    for entity, tri, name in zip(SHELLS, _radiator_triangles(), ("panel1", "panel2")):
+        nodes = rec["shell_nodes"][name]
+        # the bounds are the first shape's; the panels have moved by < 1 µm since
+        assert (nodes >= lo - 1e-6).all() and (nodes <= hi + 1e-6).all(), name
+        static = data.static_values[entity]
+        assert np.array_equal(np.array(static["Mesh3D:triangle_indices"]), np.arange(108).reshape(36, 3))
+        assert static["Mesh3D:albedo_factor"] == [_rgba_u32(SHELL_RGBA)]
+        last = np.array(data.last(entity, "Mesh3D:vertex_positions"), dtype=np.float32)
+        assert np.array_equal(last, nodes[tri.ravel()].astype(np.float32)), name
+        assert data.times[entity] == _grid_ns(rec["times"])
+
+
+def test_layout_of_a_shell_scene_knows_its_meshes_and_bounds():
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.scene import load_scene
+    from ros2_node.viz.layout import TwinLayout
+
+    model = compile_scene(load_scene(RADIATOR))
+    lay = TwinLayout.from_model(model)
+    assert [s.name for s in lay.shells] == ["panel1", "panel2"]
+    for s, info, tri in zip(lay.shells, model.shells, _radiator_triangles()):
+        assert np.array_equal(s.triangles, tri)
+        # the first place of each node in the triangle list gives it back
+        assert np.array_equal(info.x0[tri.ravel()][s.first], info.x0)
+        assert (info.x0 >= lay.bounds[0]).all() and (info.x0 <= lay.bounds[1]).all()
+    assert lay.shell("panel1") is lay.shells[0] and lay.shell("new").triangles is None
+    # a scene of one generated shell (no named nodes at all), clamped along an edge: the camera
+    # frames the mesh and every node of the clamped edge is a support point
+    from flexmb_core.scene.loader import parse_yaml, scene_from_dict
+
+    path = ROOT / "scenes" / "shell_slit_annulus.yaml"
+    data = parse_yaml(path.read_text())
+    data["shells"]["plate"]["mesh"]["divisions"] = [1, 6]           # 12 triangles: a quick compile
+    annulus = compile_scene(scene_from_dict(data, source=str(path)))
+    assert not annulus.scene.nodes
+    lay = TwinLayout.from_model(annulus)
+    plate = annulus.shell("plate")
+    assert np.array_equal(lay.bounds, [plate.x0.min(axis=0), plate.x0.max(axis=0)])
+    clamped = np.asarray(plate.edges["start"])
+    assert np.array_equal(lay.support_points, plate.x0[clamped]) and len(clamped) == 4
+    assert lay.support_labels[0] == f"plate.start[{clamped[0]}] (clamp)"
 
 
 def test_view_rejects_what_is_not_a_recording(tmp_path):

@@ -22,6 +22,7 @@ from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
 from ros2_node import messages, topics
 from ros2_node.bag.schemas import schema_text
+from ros2_node.shells import ShellShapes
 
 LOG_EPOCH_NS = 1_700_000_000_000_000_000      # log times start here (s since 1970: 2023-11-14)
 
@@ -33,7 +34,9 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
 
     ``bag=True`` writes a rosbag2 directory ``out`` (``metadata.yaml`` + ``out/<name>_0.mcap``);
     ``chunk_size`` (bytes) is the MCAP chunk size (small: many chunks, as a long recording has).
-    Returns ``{"path", "times": [s, ...], "members", "actuators", "platforms"}``.
+    Returns ``{"path", "times": [s, ...], "members", "actuators", "platforms", "counts",
+    "shell_nodes"}``; ``shell_nodes[name] (N, 3)``: the shell's node positions at the last state,
+    read straight from the state vector (m).
     """
     from mcap_ros2.writer import Writer
 
@@ -44,6 +47,7 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
     sim.warmup()
     sim.initialize()
     reporter = TwinReporter(model)
+    shells = ShellShapes(model)
     kinds = tuple(m.kind for m in model.members)
     out = Path(out)
     mcap_path = out / f"{out.name}_0.mcap" if bag else out
@@ -77,6 +81,7 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
 
         def record(step_wall: float) -> None:
             s = reporter.read(sim)
+            shells.read(sim.state.q)
             timing.step_wall_time, timing.steps = step_wall, sim.stats.steps
             wall = sim.stats.wall_time_s
             if wall > since[1]:
@@ -92,7 +97,7 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
                 put(topics.pose_topic(name, k).resolved(), messages.platform_pose(s, k))
             if poses:
                 put(topics.TF.resolved(), messages.tf(s))
-            put(topics.SHAPE.resolved(), messages.shape(s, kinds))
+            put(topics.SHAPE.resolved(), messages.shape(s, kinds, shells))
             put(topics.STATUS.resolved(), messages.status(s, timing))
             times.append(s.t)
             seq[0] += 1
@@ -119,7 +124,8 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
     if bag:
         _bag_metadata(out, mcap_path, types, counts, times)
     return {"path": out, "times": times, "members": [m.name for m in model.members],
-            "actuators": list(model.actuators.names), "platforms": poses, "counts": counts}
+            "actuators": list(model.actuators.names), "platforms": poses, "counts": counts,
+            "shell_nodes": {sh.name: sim.state.q[sh.ydofs].copy() for sh in model.shells}}
 
 
 def _bag_metadata(out: Path, mcap_path: Path, types: dict, counts: dict, times: list[float]) -> None:
