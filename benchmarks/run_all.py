@@ -5,7 +5,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-BENCHMARKS = ["b1_cantilever.py", "stewart_platform.py", "bench_linear_solvers.py", "node_latency.py"]
+BENCHMARKS = ["b1_cantilever.py", "stewart_platform.py", "work_precision.py", "bench_linear_solvers.py",
+              "node_latency.py"]   # work_precision.py = `flexmb bench` (docs/benchmarks/workprecision.md)
 
 if __name__ == "__main__":
     for b in BENCHMARKS:

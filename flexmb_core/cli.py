@@ -6,6 +6,11 @@ Verbs:
                                           offline simulation; JSON summary of speed, solver
                                           health and the final values of the scene's outputs
   flexmb commands stewart --out CSV       the Stewart appendix leg-length commands (Eqs. 52–60)
+  flexmb bench [--case b1|spin_up|stewart|all] [--quick] [--out DIR]
+                                          work-precision reports (source checkout, extra [bench])
+  flexmb tune SCENE --tol TOL [--until T] [--out DIR]
+                                          cheapest fidelity whose outputs stay within TOL of a
+                                          converged reference; writes the tuned scene and its table
 
 Exit codes: 0 success, 1 bad input (scene, flags), 2 a step did not converge.
 """
@@ -134,7 +139,7 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"JIT warm-up {warm:.2f} s); Newton mean {summary['newton_iterations_mean']:.2f}, "
               f"max {summary['newton_iterations_max']}; unconverged {summary['unconverged_steps']}")
         for k, v in summary["outputs"].items():
-            print(f"  {k}: {v}")
+            print(f"  {k}: {_brief(v)}")
         if tracker.active:
             tr = summary["tracking"]
             print(f"  tracking of '{tr['output']}' vs the commanded pose: max position error "
@@ -144,6 +149,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"flexmb run: {error}", file=sys.stderr)
         return 130 if error.startswith("interrupted") else 2
     return 0
+
+
+def _brief(value, limit: int = 6) -> str:
+    """A printable output value: long lists (shapes) show their length and ends; the JSON summary
+    keeps them whole."""
+    if isinstance(value, list) and len(value) > limit:
+        return f"[{len(value)} entries: {value[0]}, …, {value[-1]}]"
+    return str(value)
 
 
 def cmd_commands(args: argparse.Namespace) -> int:
@@ -159,6 +172,76 @@ def cmd_commands(args: argparse.Namespace) -> int:
     stewart.write_command_table(args.out, t, lengths, rates)
     print(f"wrote {n} rows × 6 legs ({args.start} start) to {args.out}")
     return 0
+
+
+def _bench_cli():
+    """``benchmarks/workprecision/cli.py`` of the source checkout, or None (an installed wheel has
+    no ``benchmarks/``). Its module import is cheap; the benchmark code loads in ``run``."""
+    root = Path(__file__).resolve().parents[1]
+    if not (root / "benchmarks" / "workprecision" / "cli.py").is_file():
+        return None
+    if str(root) not in sys.path:
+        sys.path.append(str(root))
+    from benchmarks.workprecision import cli
+    return cli
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    bench = _bench_cli()
+    if bench is None:
+        print("flexmb bench: needs a source checkout: benchmarks/workprecision/ was not found next to "
+              f"{Path(__file__).resolve().parent} (install flexmb editable from the repository, extra [bench])",
+              file=sys.stderr)
+        return 1
+    return bench.run(args)
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    import yaml
+
+    from .scene.loader import parse_yaml
+    from .tune import report_markdown, tune
+
+    path = Path(args.scene)
+    try:
+        data = parse_yaml(path.read_text())
+    except OSError as exc:
+        raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
+    _load(args.scene)                                   # validate first: errors name file:key
+    if not args.tol > 0:
+        print(f"flexmb tune: --tol must be a positive number, got {args.tol}", file=sys.stderr)
+        return 1
+    until = args.until if args.until is not None else float(data.get("solver", {}).get("until", 1.0))
+
+    def progress(trial):
+        if not args.quiet:
+            state = "ok " if trial.ok else ("ERR" if trial.message else "   ")
+            print(f"  [{state}] {trial.label}: {trial.steps_per_s:8.0f} steps/s, max error {trial.max_error:.2e}",
+                  flush=True)
+
+    held = tuple(x for x in (args.outputs or "").split(",") if x) or None
+    result = tune(data, args.tol, until, source=str(path), progress=progress, outputs=held)
+    out = Path(args.out or "build/tune")
+    out.mkdir(parents=True, exist_ok=True)
+    stem = path.stem
+    tuned = out / f"{stem}_tuned.yaml"
+    best = result.best
+    header = (f"# Tuned from {path} by `flexmb tune --tol {args.tol:g} --until {result.until:g}`:\n"
+              f"# {best.label}; {best.steps_per_s:.0f} steps/s, largest output error {best.max_error:.2e} against\n"
+              f"# the refined reference (table: {stem}_tune.md). Comments of the original are not carried over.\n")
+    tuned.write_text(header + yaml.safe_dump(best.scene, sort_keys=False, allow_unicode=True))
+    (out / f"{stem}_tune.md").write_text(report_markdown(result, data.get("name", stem)))
+    (out / f"{stem}_tune.json").write_text(json.dumps({
+        "scene": str(path), "tolerance": args.tol, "until": result.until, "tuned_scene": str(tuned),
+        "reference_wall_per_sim_s": result.reference_wall_per_sim_s,
+        "chosen": best.label, "within_tolerance": best.ok,
+        "trials": [{"label": t.label, "ok": t.ok, "steps_per_s": t.steps_per_s, "wall_per_sim_s": t.wall_per_sim_s,
+                    "errors": t.errors, "message": t.message} for t in result.trials]}, indent=1))
+    if not args.quiet:
+        print(f"chosen: {best.label} ({best.steps_per_s:.0f} steps/s, "
+              f"{result.baseline.wall_per_sim_s / best.wall_per_sim_s:.2f}× the scene as declared, "
+              f"largest error {best.max_error:.2e}); wrote {tuned} and {stem}_tune.md")
+    return 0 if best.ok else 3
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -193,9 +276,30 @@ def build_parser() -> argparse.ArgumentParser:
     cm.add_argument("--blend-continuity", type=int, choices=(2, 3, 4), default=2,
                     help="continuity of the blends: C² (quintic), C³, C⁴ (nonic)")
     cm.set_defaults(func=cmd_commands)
+
+    bench = _bench_cli()
+    bn = sub.add_parser("bench", help="work-precision reports: error against wall time per simulated second "
+                                      "(B1, spin-up, Stewart; peers when installed)",
+                        description=bench.__doc__ if bench else None,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    if bench is not None:
+        bench.add_arguments(bn)
+    bn.set_defaults(func=cmd_bench)
+
+    tn = sub.add_parser("tune", help="cheapest fidelity whose outputs stay within a tolerance of a converged "
+                                     "reference (model only what a scene needs)")
+    tn.add_argument("scene")
+    tn.add_argument("--tol", type=float, required=True,
+                    help="largest output error: m for positions, rad for angles, relative for forces and energy")
+    tn.add_argument("--until", type=float, help="horizon of every trial (s); default: the scene's solver.until")
+    tn.add_argument("--out", help="directory for SCENE_tuned.yaml, SCENE_tune.md/.json (default build/tune)")
+    tn.add_argument("--outputs", metavar="A,B,..",
+                    help="outputs held to --tol (default: the kinematic ones; forces and energy are reported)")
+    tn.add_argument("--quiet", action="store_true")
+    tn.set_defaults(func=cmd_tune)
     # Where the application layer (ros2_node.cli) adds its verbs and its options to `run`.
     p.verbs = sub
-    p.verb_parsers = {"check": c, "run": r, "commands": cm}
+    p.verb_parsers = {"check": c, "run": r, "commands": cm, "bench": bn, "tune": tn}
     return p
 
 

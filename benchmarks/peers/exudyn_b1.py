@@ -56,6 +56,9 @@ NEWTON_ABS_TOL = 1e-6         # [N], see _settings
 ELASTICA_K2 = (0.839358279175, -0.493457480397)   # inextensible elastica, (x, z) / L
 
 
+PACKAGE = "exudyn"
+
+
 def available() -> bool:
     """True if the optional peer ``exudyn`` can be imported."""
     try:
@@ -98,10 +101,11 @@ def _ramp_user_function(mbs, t, load):
     return [0.0, -P_TIP * s, 0.0]
 
 
-def build_model(n_elements: int, *, damping: str = "mass") -> dict[str, Any]:
+def build_model(n_elements: int, *, damping: str = "mass", history: bool = False) -> dict[str, Any]:
     """Build (not solve) the B1 cantilever; returns the Exudyn handles a run needs.
 
     damping: "mass" (c_m M v, the B1 definition) or "none" (for overhead measurements).
+    history: also add a tip-position sensor stored internally (C++, no Python during the solve).
     """
     if n_elements < 1:
         raise ValueError(f"n_elements must be >= 1, got {n_elements}")
@@ -147,14 +151,21 @@ def build_model(n_elements: int, *, damping: str = "mass") -> dict[str, Any]:
                                       itemTypeName="LoadForceVector")
     mbs.AddLoad(LoadForceVector(markerNumber=m_tip, loadVector=[0.0, -P_TIP, 0.0],
                                 loadVectorUserFunction=ramp))
+    sensor = None
+    if history:
+        from exudyn.itemInterface import SensorNode
+        sensor = mbs.AddSensor(SensorNode(nodeNumber=nodes[-1], storeInternal=True, writeToFile=False,
+                                          outputVariableType=exu.OutputVariableType.Position))
     mbs.Assemble()
     # keep `ramp` alive: it owns the expression tree the C++ load evaluates
     return {"exu": exu, "sc": sc, "mbs": mbs, "tip_node": nodes[-1], "ramp": ramp,
-            "n_ode2": 4 * (n_elements + 1)}
+            "n_ode2": 4 * (n_elements + 1), "sensor": sensor}
 
 
-def _settings(exu, dt: float, t_end: float):
+def _settings(exu, dt: float, t_end: float, history_period: float | None = None):
     s = exu.SimulationSettings()
+    if history_period is not None:
+        s.solution.sensors.writePeriod = history_period
     steps = int(round(t_end / dt))
     ti = s.timeIntegration
     ti.endTime = t_end
@@ -177,9 +188,9 @@ def _settings(exu, dt: float, t_end: float):
     return s, steps
 
 
-def _solve(model: dict[str, Any], dt: float, t_end: float) -> dict[str, Any]:
+def _solve(model: dict[str, Any], dt: float, t_end: float, history_period: float | None = None) -> dict[str, Any]:
     exu, mbs = model["exu"], model["mbs"]
-    settings, steps = _settings(exu, dt, t_end)
+    settings, steps = _settings(exu, dt, t_end, history_period)
     t0 = time.perf_counter()
     try:
         mbs.SolveDynamic(settings, solverType=exu.DynamicSolverType.GeneralizedAlpha)
@@ -189,13 +200,18 @@ def _solve(model: dict[str, Any], dt: float, t_end: float) -> dict[str, Any]:
     wall = time.perf_counter() - t0
     it = mbs.sys["dynamicSolver"].it
     tip = mbs.GetNodeOutput(model["tip_node"], exu.OutputVariableType.Position)
-    return {"wall": wall, "steps": steps, "tip": (float(tip[0]), float(tip[1])),
-            "newton": it.newtonStepsCount, "jacobians": it.newtonJacobiCount,
-            "converged": converged, "t_reached": float(it.currentTime)}
+    out = {"wall": wall, "steps": steps, "tip": (float(tip[0]), float(tip[1])),
+           "newton": it.newtonStepsCount, "jacobians": it.newtonJacobiCount,
+           "converged": converged, "t_reached": float(it.currentTime)}
+    if model.get("sensor") is not None:
+        h = np.asarray(mbs.GetSensorStoredData(model["sensor"]))          # (n, 4): t, x, y, z
+        out["history"] = np.column_stack([h[:, 0], h[:, 1], np.zeros(len(h)), h[:, 2]])   # B1 axes
+    return out
 
 
 def run_b1(n_elements: int, dt: float = 1e-3, t_end: float = 2.0,
-           reference=ELASTICA_K2, repeats: int = 3, *, damping: str = "mass") -> dict:
+           reference=ELASTICA_K2, repeats: int = 3, *, damping: str = "mass",
+           history_period: float | None = None) -> dict:
     """Run B1 with ``n_elements`` ANCFCable2D elements; time integration timed ``repeats`` times.
 
     Each repeat solves a freshly built model; ``wall_time_s`` is the median time of
@@ -203,6 +219,8 @@ def run_b1(n_elements: int, dt: float = 1e-3, t_end: float = 2.0,
     ``reference`` is the tip (x, z) / L that the error is measured against.
     A Newton failure is returned, not raised: ``converged`` False, ``t_reached`` < t_end,
     ``tip_error``, ``steps_per_s`` and ``rtf`` NaN (Exudyn prints its own diagnosis).
+    ``history_period`` (s): also return ``history`` (n, 4): t, x, y = 0, z of the tip (m, B1
+    axes) every period, from an internally stored sensor (the timed solve includes it).
     """
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
@@ -210,8 +228,8 @@ def run_b1(n_elements: int, dt: float = 1e-3, t_end: float = 2.0,
         raise ValueError(f"dt and t_end must be > 0, got dt={dt}, t_end={t_end}")
     runs = []
     for _ in range(repeats):
-        model = build_model(n_elements, damping=damping)
-        runs.append(_solve(model, dt, t_end))
+        model = build_model(n_elements, damping=damping, history=history_period is not None)
+        runs.append(_solve(model, dt, t_end, history_period))
         if not runs[-1]["converged"]:
             break
     exu = model["exu"]
@@ -220,8 +238,10 @@ def run_b1(n_elements: int, dt: float = 1e-3, t_end: float = 2.0,
     tip = np.array(last["tip"]) / LENGTH
     ref = np.asarray(reference, dtype=float)
     error = float(np.linalg.norm(tip - ref)) if last["converged"] else math.nan
-    return {
+    out = {
         "code": f"exudyn {exu.config.Version()}",
+        "family": f"Exudyn ANCF cable2D, {n_elements} el., gen-α ρ∞={SPECTRAL_RADIUS:g}",
+        "integrator": "generalized_alpha",
         "model": f"ANCFCable2D, {n_elements} el. (clamp: 3 coordinate constraints; "
                  f"damping: {'c_m M v via GenericODE2' if damping == 'mass' else 'none'}; "
                  f"load: symbolic user function)",
@@ -239,6 +259,9 @@ def run_b1(n_elements: int, dt: float = 1e-3, t_end: float = 2.0,
         "converged": last["converged"],
         "t_reached": last["t_reached"],
     }
+    if "history" in last:
+        out["history"] = last["history"]
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -9,7 +9,10 @@ The same mechanism as scenes/stewart_platform.yaml, built from Exudyn's C++ item
   * actuation: the leg length L(t) of the appendix program (flexmb's Hermite table, blended start and
     switch, identical commands) enters each element as ``referenceAxialStrain = L(t)/L0 − 1``, set from
     a Python pre-step user function every step (Exudyn has no other way to change an object parameter
-    during a solve) — the "per-step Python command update" of SPEC §8;
+    during a solve) — the "per-step Python command update" of SPEC §8. Exudyn passes that function
+    the *end* time t_{n+1} of the coming step (the state is still at t_n): the commands are L(t_{n+1})
+    and the pose sampled there is the one at t_n (until 2026-11-23 this module read t as t_n, which
+    set the commands one step ahead and stamped the poses one step late);
   * joints: base ends on ``ObjectJointSpherical`` to ground; platform ends on ``ObjectJointSpherical``
     to the platform;
   * platform: one rigid body (Euler parameters) with the mass and inertia of flexmb's three steel tube
@@ -201,12 +204,14 @@ def run(case: str = "ancf4", dt: float = 1e-3, until: float = 20.0, repeats: int
         node = m["body_node"]
 
         def pre_step(mbs_, t):
-            k = round(t / MARK)
-            if abs(t - k * MARK) < 0.1 * dt:
+            # Exudyn calls this before the step t_n → t_{n+1} with t = t_{n+1} (the state is at t_n)
+            t_n = t - dt
+            k = round(t_n / MARK)
+            if abs(t_n - k * MARK) < 0.1 * dt:
                 p = np.array(mbs_.GetNodeOutput(node, exu.OutputVariableType.Position))
                 r = np.array(mbs_.GetNodeOutput(node, exu.OutputVariableType.RotationMatrix)).reshape(3, 3)
                 marks[k] = (p, r)
-            _set_commands(m, t + dt, buf)                                   # L(t_{n+1}) for the step t → t + Δt
+            _set_commands(m, t, buf)                                        # L(t_{n+1}) for the step t_n → t_{n+1}
             return True
 
         if commands:
@@ -218,6 +223,10 @@ def run(case: str = "ancf4", dt: float = 1e-3, until: float = 20.0, repeats: int
         except exu.SolverError:
             ok = False
         walls.append(time.perf_counter() - t0)
+        if ok and commands:          # the pre-step function never sees the end time: record it here
+            p = np.array(mbs.GetNodeOutput(node, exu.OutputVariableType.Position))
+            r = np.array(mbs.GetNodeOutput(node, exu.OutputVariableType.RotationMatrix)).reshape(3, 3)
+            marks[round(until / MARK)] = (p, r)
         it = mbs.sys["dynamicSolver"].it
         out = {"marks": marks, "ok": ok, "t_reached": float(it.currentTime), "newton": it.newtonStepsCount,
                "jacobians": it.newtonJacobiCount, "n_ode2": m["n_ode2"]}

@@ -1,0 +1,117 @@
+"""``flexmb bench``: work-precision reports (error against wall time per simulated second).
+
+    flexmb bench                                   # every case, full sweep, peers when installed
+    flexmb bench --case b1 --quick --out /tmp/wp   # a small sweep (seconds)
+    flexmb bench --case stewart --make-reference   # re-run the stored converged reference first
+
+Writes ``workprecision_<case>.csv`` / ``.json`` / ``.png`` per case and ``workprecision.md`` (every case
+present in ``--out``) to ``--out`` (default ``docs/benchmarks``). Also runnable without the
+``flexmb`` entry point: ``python benchmarks/work_precision.py [flags]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+CASE_NAMES = ("b1", "spin_up", "stewart")
+
+
+def _cases() -> dict:
+    from . import b1, spin_up, stewart
+    return {"b1": b1, "spin_up": spin_up, "stewart": stewart}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags of ``flexmb bench`` (importing this module stays cheap: no numba, no flexmb_core)."""
+    p.add_argument("--case", choices=CASE_NAMES + ("all",), default="all",
+                   help="which benchmark: the cantilever B1, the spin-up maneuver, the Stewart twin, or all")
+    p.add_argument("--quick", action="store_true",
+                   help="a small sweep (a few Δt of one or two families, shorter runs; seconds per case)")
+    p.add_argument("--out", default=str(ROOT / "docs" / "benchmarks"),
+                   help="output directory for the CSV, JSON, PNG and markdown files (default: docs/benchmarks)")
+    p.add_argument("--no-peers", action="store_true", help="skip the peer codes even when installed")
+    p.add_argument("--no-plot", action="store_true", help="skip the PNGs (no matplotlib needed)")
+    p.add_argument("--make-reference", action="store_true",
+                   help="re-run and store the converged reference of each selected case first "
+                        "(benchmarks/reference/<case>.csv; minutes)")
+    p.add_argument("--repeats", type=int, default=None,
+                   help="at most this many timed repeats per run (default 5, --quick 1); the median counts")
+    p.add_argument("--repeat-budget", type=float, default=None, metavar="S",
+                   help="repeat a run only while its walls sum to less than S seconds (default 3, --quick 0)")
+
+
+def _load() -> str:
+    try:
+        return f"{os.getloadavg()[0]:.1f}"
+    except OSError:
+        return "?"
+
+
+def run(args: argparse.Namespace, log=print) -> int:
+    """Run the selected cases; returns the exit code (0; 1 on bad flags or a missing reference)."""
+    from benchmarks.stewart_platform import machine_info
+
+    from . import core, report
+
+    repeats = args.repeats if args.repeats is not None else (1 if args.quick else 5)
+    budget = args.repeat_budget if args.repeat_budget is not None else (0.0 if args.quick else 3.0)
+    if repeats < 1:
+        log(f"flexmb bench: --repeats must be >= 1, got {repeats}", file=sys.stderr)
+        return 1
+    if budget < 0:
+        log(f"flexmb bench: --repeat-budget must be >= 0 s, got {budget}", file=sys.stderr)
+        return 1
+    out = Path(args.out)
+    cases = _cases()
+    selected = CASE_NAMES if args.case == "all" else (args.case,)
+    for name in selected:
+        mod = cases[name]
+        t0, load_start = time.perf_counter(), _load()
+        log(f"== {mod.TITLE}{' (--quick)' if args.quick else ''}", flush=True)
+        if args.make_reference:
+            log(f"  reference: {mod.FINE.key} ...", flush=True)
+            path = mod.make_reference()
+            log(f"  wrote {path}", flush=True)
+        try:
+            header, _, _ = core.read_reference(mod.REFERENCE)
+        except FileNotFoundError as exc:
+            log(f"flexmb bench: {exc}", file=sys.stderr)
+            return 1
+        rows = mod.run(args.quick, budget_s=budget, max_repeats=repeats, log=lambda s: log(s, flush=True))
+        notes: list[str] = []
+        if not args.no_peers:
+            peer_rows, notes = mod.run_peers(args.quick, repeats=repeats, log=lambda s: log(s, flush=True))
+            rows += peer_rows
+            for n in notes:
+                log(f"  {n}")
+        t_end = mod.until(args.quick) if hasattr(mod, "until") else mod.UNTIL
+        meta = {"case": name, "quick": args.quick, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "machine": machine_info(), "load_start": load_start, "load_end": _load(),
+                "runtime_s": time.perf_counter() - t0, "sim_time_s": t_end, "repeats": repeats,
+                "repeat_budget_s": budget, "peers": not args.no_peers, "notes": notes,
+                "reference": {"file": str(mod.REFERENCE.relative_to(core.ROOT)), **header},
+                "error_unit": mod.ERROR_UNIT, "error_measure": mod.ERROR_MEASURE}
+        report.write_csv(report.csv_path(out, name), rows)
+        report.write_json(out / f"workprecision_{name}.json", meta)
+        if not args.no_plot:
+            png = out / f"workprecision_{name}.png"
+            if report.write_png(png, report.read_csv(report.csv_path(out, name)), mod.PANELS, mod.TARGET):
+                log(f"  wrote {png}")
+            else:
+                log("  matplotlib is not installed (extra 'bench'): no PNG")
+        log(f"  wrote {report.csv_path(out, name)} ({len(rows)} runs, {meta['runtime_s']:.0f} s)", flush=True)
+    md = report.write_markdown(out, cases)
+    log(f"wrote {md}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="flexmb bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    return run(p.parse_args(argv))
