@@ -6,7 +6,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = ["b1_cantilever.py", "stewart_platform.py", "work_precision.py", "bench_linear_solvers.py",
-              "node_latency.py"]   # work_precision.py = `flexmb bench` (docs/benchmarks/workprecision.md)
+              "node_latency.py",   # work_precision.py = `flexmb bench` (docs/benchmarks/workprecision.md)
+              "shell_cost.py"]     # docs/benchmarks/shell.md
 
 if __name__ == "__main__":
     for b in BENCHMARKS:
