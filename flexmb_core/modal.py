@@ -37,10 +37,11 @@ def natural_modes(model: Model, q: np.ndarray | None = None, lam: np.ndarray | N
     if model.n_multipliers:
         raise FlexmbError("modal analysis of models with rigid corners (multipliers) is not supported yet")
     ws = Workspace(model)
-    q = model.q0 if q is None else q
+    # a writable copy: the frozen model.q0 would compile a read-only specialization of the kernels
+    q = np.array(model.q0 if q is None else q, dtype=float)
     lam = np.ones(model.actuators.l0.size) if lam is None else lam
     update_load_scales(model, ws, t)
-    assemble(model, ws, np.ascontiguousarray(q, dtype=float), lam, True)
+    assemble(model, ws, q, lam, True)
     shape = (model.nfree, model.nfree)
     k = sp.csr_matrix((ws.kdata, model.indices, model.indptr), shape=shape).toarray()
     m = sp.csr_matrix((model.mass_kdata, model.indices, model.indptr), shape=shape).toarray()

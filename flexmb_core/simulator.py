@@ -34,6 +34,7 @@ class RunStats:
     iterations: list[int] = field(default_factory=list)
     unconverged_steps: int = 0
     substepped_steps: int = 0
+    guard_rejected_steps: int = 0     # steps in which the step guard refused a Newton root
     wall_time_s: float = 0.0
     max_residual: float = 0.0
 
@@ -102,6 +103,8 @@ class Simulator:
         from .observers import actuator_forces
         if self.model.actuators.l0.size:
             actuator_forces(self.model, self.ws, st)
+        if self._dynamic is not None:
+            self._dynamic.warmup(st)
         return time.perf_counter() - t0
 
     def initialize(self) -> StepResult:
@@ -129,7 +132,7 @@ class Simulator:
         step fails and the policy is ``stop`` or ``substep``; ``accept_flagged`` returns the flagged result."""
         dt = self.spec.dt if dt is None else dt
         t_new = self.state.t + dt
-        lam = self.command_lengths(t_new) / self.model.actuators.l0
+        lam = (self.command_lengths(t_new) / self.model.actuators.l0) if self._lengths.size else self._lengths
         t0 = time.perf_counter()
         if self._dynamic is not None:
             res = self._dynamic.step(self.state, dt, lam)
@@ -140,6 +143,8 @@ class Simulator:
         self.stats.iterations.append(res.iterations)
         if res.substeps > 1:
             self.stats.substepped_steps += 1
+        if res.guard:
+            self.stats.guard_rejected_steps += 1
         self.last = res
         if not res.converged:
             self.stats.unconverged_steps += 1
@@ -186,5 +191,6 @@ class Simulator:
             "newton_iterations_max": int(max(it)) if it else 0,
             "unconverged_steps": self.stats.unconverged_steps,
             "substepped_steps": self.stats.substepped_steps,
+            "guard_rejected_steps": self.stats.guard_rejected_steps,
             "max_relative_residual": self.stats.max_residual,
         }

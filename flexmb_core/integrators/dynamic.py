@@ -33,10 +33,12 @@ from ..model.assembly import apply_drives, assemble, assemble_constraints, updat
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
+from ..solvers.guard import StepGuard
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
-from .energy import csr_matvec, energies
+from .energy import compact_csr, csr_matvec, energies
+from .fast import FastFrameStep
 from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
 
 
@@ -65,14 +67,14 @@ class DynamicIntegrator:
         self.lu = FixedPatternSolver(model)
         n = model.ndof
         self._ma = np.zeros(n)
+        self._mass = compact_csr(*model.mass_csr)   # M without its stored zeros (same products)
         self._backup = None
         self._free = model.free
         self._inv_scale = 1.0 / model.dof_scale[model.free]
-        self._q_n = np.zeros(n)
-        self._v_n = np.zeros(n)
-        self._a_n = np.zeros(n)
-        self._at_n = np.zeros(n)
-        self._q_hat = np.zeros(n)
+        # Step-start rows q_n, v_n, a_n, ã_n, q̂, the Newton start q_p and the guard's start forces,
+        # stacked so that the step guard takes them as one argument.
+        self._ivec = np.zeros((7, n))
+        self._q_n, self._v_n, self._a_n, self._at_n, self._q_hat, self._q_p, self._g_p = self._ivec
         self._w = np.zeros(n)
         self._q_eval = np.zeros(n)
         self._v_eval = np.zeros(n)
@@ -84,21 +86,69 @@ class DynamicIntegrator:
         self._t_hist = math.nan
         self._rf = np.zeros(model.nsys)
         self._nf = model.nfree
-        self._factored_coef: float | None = None   # tangent coefficient of the held factorization
-        self._tangent_age = 0                       # steps since the last tangent refresh
-        self.tangent_updates = 0
+        # Held tangent: [held (0/1), its coefficient c_a + c_m c_v, age in steps, refreshes so far];
+        # an array that the numba step reads and writes in place (see the properties below).
+        self._tan = np.zeros(4)
+        self.guard = StepGuard(model, tolerance=spec.tolerance)
+        # One numba call per step when it covers the model (bit-identical to _newton; None: the
+        # Python path; set it to None to force that path).
+        self.fast = None if FastFrameStep.unsupported(model, spec) else FastFrameStep(self)
+        self._c_p = np.zeros(model.n_multipliers)   # constraint violations at the Newton start
+
+    @property
+    def _factored_coef(self) -> float | None:
+        """Tangent coefficient of the held factorization, or None."""
+        return float(self._tan[1]) if self._tan[0] != 0.0 else None
+
+    @_factored_coef.setter
+    def _factored_coef(self, coef: float | None) -> None:
+        if coef is None:
+            self._tan[0] = 0.0
+        else:
+            self._tan[0] = 1.0
+            self._tan[1] = coef
+
+    @property
+    def _tangent_age(self) -> int:
+        """Steps since the last tangent refresh."""
+        return int(self._tan[2])
+
+    @_tangent_age.setter
+    def _tangent_age(self, age: int) -> None:
+        self._tan[2] = age
+
+    @property
+    def tangent_updates(self) -> int:
+        """Tangent refreshes so far."""
+        return int(self._tan[3])
+
+    @tangent_updates.setter
+    def tangent_updates(self, n: int) -> None:
+        self._tan[3] = n
 
     # -- start ------------------------------------------------------------------------------
+    def warmup(self, state: State) -> None:
+        """Compile (or load) the numba step on a throwaway copy of ``state``; :meth:`initialize`
+        then resets what it touched (held tangent, loads, the guard's ledger)."""
+        if self.fast is not None:
+            self.fast.attempt(state.copy(), self.spec.dt)
+            self.fast.invalidate()
+            self._factored_coef = None
+            self._tangent_age = 0
+            self.tangent_updates = 0
+
     def initialize(self, state: State) -> StepResult:
         """Consistent initial acceleration ``M_ff a_f = (f_ext − f_int − C v)_f`` (or zero)."""
         self._factored_coef = None
+        if self.fast is not None:
+            self.fast.invalidate()
         m, ws = self.model, self.ws
         update_load_scales(m, ws, state.t)
         apply_drives(m, state.q, state.t)
         strain = assemble(m, ws, state.q, state.lam, False, v=state.v, lam_rate=state.lam_rate)
         state.a[:] = 0.0
         if self.spec.initial_acceleration == "consistent":
-            csr_matvec(*m.mass_csr, state.v, self._ma)
+            csr_matvec(*self._mass, state.v, self._ma)
             rhs = np.zeros(m.nsys)
             rhs[:self._nf] = (ws.f_ext - ws.r - m.mass_damping * self._ma)[self._free]
             if m.n_multipliers:
@@ -113,7 +163,8 @@ class DynamicIntegrator:
             state.a[self._free] = sol[:self._nf]
             state.mult[:] = sol[self._nf:]
         state.atil[:] = state.a
-        kin, grav = energies(m, state)
+        kin, grav = energies(m, state, self._mass)
+        self.guard.ledger_start(state.t, kin, strain, ws.f_ext, ws.r, state.q, state.a, state.v)
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
 
     # -- one step ---------------------------------------------------------------------------
@@ -128,14 +179,33 @@ class DynamicIntegrator:
         """
         if self._backup is None:
             self._backup = state.copy()
-        self._backup.assign(state)
-        res = self._newton(state, dt, lam_new, lam_rate)
+        res = self.fast.attempt(state, dt) if self.fast is not None else None
+        if res is None:
+            self._backup.assign(state)
+            res = self._newton(state, dt, lam_new, lam_rate)
+            if self.fast is not None:
+                self.fast.invalidate()
+        elif not res.converged:
+            self._backup.assign(state)      # the numba attempt leaves the step's start in place
         if res.converged or self.spec.on_unconverged != "substep":
             if not res.converged and self.spec.on_unconverged == "stop":
                 state.assign(self._backup)
             return res
-        return retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, dt / n, lam_k), state,
-                               self._backup, lam_new, self.spec.max_substep_levels, "sub-steps")
+        # a failed step leaves the guard's energy ledger at the step's start: keep it for the splits
+        self.guard.ledger_save()
+        res = retry_in_pieces(res, lambda k, n, lam_k: self._piece(state, dt / n, lam_k, k), state,
+                              self._backup, lam_new, self.spec.max_substep_levels, "sub-steps")
+        if self.fast is not None:
+            self.fast.invalidate()
+        if not res.converged:
+            self.guard.ledger_restore()
+        return res
+
+    def _piece(self, state: State, dt: float, lam_new: np.ndarray, k: int) -> StepResult:
+        """Sub-step ``k`` of a split step (each split starts again from the step's start)."""
+        if k == 1:
+            self.guard.ledger_restore()
+        return self._newton(state, dt, lam_new)
 
     def _newton(self, state: State, dt: float, lam_new: np.ndarray,
                 lam_rate: np.ndarray | None = None) -> StepResult:
@@ -165,6 +235,7 @@ class DynamicIntegrator:
             else:
                 state.lam_rate[:] = lam_rate
             self._lam_cand[:] = state.lam
+        lam_moved = lam_new.size > 0 and bool(np.any(lam_new != state.lam))
         state.lam[:] = lam_new
         ch = spec.integrator == "chung_hulbert"
         if ch and m.n_multipliers:
@@ -173,6 +244,7 @@ class DynamicIntegrator:
         q = state.q
         q[free] = q_hat[free] + (beta * dt * dt) * at_n[free]
         apply_drives(m, q, t_new)
+        self._q_p[:] = q
         if ch:
             # Newmark kinematics with a itself (ã ≡ a); inertia (1−αm) a_{n+1} + αm a_n through the
             # fused kernel with αf = 0; forces at q_{n+1−αf}; tangent (1−αf) K + (1−αm)/(βΔt²) M.
@@ -187,12 +259,15 @@ class DynamicIntegrator:
         rel = math.inf
         message = ""
         strain = 0.0
+        guarded = self.guard.enabled
+        u_p = 0.0
+        diss_p = 0.0
         it = 0
         modified = spec.newton == "modified"
         refresh = (not modified or self._factored_coef != coef
                    or self._tangent_age >= spec.tangent_max_age)
         prev_inc = math.inf
-        mi, mj, mv = m.mass_csr
+        mi, mj, mv = self._mass
         for it in range(1, spec.max_iterations + 1):
             if ch:
                 np.multiply(q, 1.0 - af, out=q_eval)
@@ -203,9 +278,15 @@ class DynamicIntegrator:
                                   lam_rate=state.lam_rate, c_v=c_v)
             else:
                 strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult)
+            keep = it == 1 and guarded
             nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am_r, af_r, gamma, dt, c_m,
-                                        mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf)
+                                        mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf, keep, self._g_p)
             rel = nr / ref
+            if keep:
+                u_p = strain
+                diss_p = ws.dissipation
+                if m.n_multipliers:
+                    self._c_p[:] = ws.rc
             viol = 0.0
             if m.n_multipliers:
                 self._rf[self._nf:] = ws.rc
@@ -245,8 +326,19 @@ class DynamicIntegrator:
         else:
             update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, state.a, state.v, state.atil)
         state.t = t_new
+        guard = ""
+        if converged and guarded:
+            kin, grav = energies(m, state, self._mass)
+            guard, why = self.guard.dynamic(self, state, dq, self._rf, self._c_p, c_v, af if ch else 0.0, u_p,
+                                            strain, diss_p, kin, t_n, not ch and not lam_moved)
+            if guard:
+                converged = False
+                message = why
+                self.guard.rejections += 1
         if not converged:
             self._factored_coef = None   # a failed step never leaves a stale tangent behind
+            if guard:
+                return StepResult(False, it, rel, inc, 1, kin, strain, grav, message=message, guard=guard)
             return StepResult(False, it, rel, inc, 1, message=message)
         self._tangent_age += 1
         if damped:
@@ -254,5 +346,8 @@ class DynamicIntegrator:
             self._t_prev, self._t_hist = t_n, t_new
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
-        kin, grav = energies(m, state)
+        if guarded:
+            self.guard.ledger_accept(t_new)
+        else:
+            kin, grav = energies(m, state, self._mass)
         return StepResult(True, it, rel, inc, 1, kin, strain, grav)

@@ -9,10 +9,12 @@ from numba import njit
 
 @njit(cache=True)
 def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
-                      m_indptr, m_indices, m_data, r_int, f_ext, free, w_buf, rf):
+                      m_indptr, m_indices, m_data, r_int, f_ext, free, w_buf, rf, keep, g_out):
     """Free part of ``r = f_int + M (a + c_m v) − f_ext`` with a, v from the integrator formulas.
 
-    ``c_tilde = 1/(βΔt²)``; ``w_buf (ndof,)`` scratch; ``rf (nfree,)`` out.
+    ``c_tilde = 1/(βΔt²)``; ``w_buf (ndof,)`` scratch; ``rf (nfree,)`` out. With ``keep`` the
+    inertial minus external part ``M (a + c_m v) − f_ext`` also goes to ``g_out`` (first nfree
+    entries), which the step guard reads at the Newton start.
     Returns (‖rf‖, reference force ‖·‖ = max(‖f_int‖, ‖M(a + c_m v)‖, ‖f_ext‖) over free DOFs).
     """
     n = q.size
@@ -32,6 +34,8 @@ def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
             s += m_data[j] * w_buf[m_indices[j]]
         r = r_int[i] + s - f_ext[i]
         rf[k] = r
+        if keep:
+            g_out[k] = s - f_ext[i]
         nr += r * r
         ni += r_int[i] * r_int[i]
         nm += s * s

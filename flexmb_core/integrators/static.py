@@ -14,6 +14,7 @@ from ..model.assembly import apply_drives, assemble, update_load_scales
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
+from ..solvers.guard import StepGuard
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
@@ -30,6 +31,9 @@ class StaticSolver:
         self.lu = FixedPatternSolver(model)
         self._inv_scale = 1.0 / model.dof_scale[model.free]
         self._backup: State | None = None
+        self.guard = StepGuard(model, tolerance=spec.tolerance)
+        self._q_p = np.zeros(model.ndof)            # Newton start of the increment under way
+        self._c_p = np.zeros(model.n_multipliers)
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         """Equilibrium at pseudo-time ``t`` starting from ``state.q``. On failure, the policy
@@ -55,11 +59,17 @@ class StaticSolver:
         update_load_scales(m, ws, t)
         q = state.q
         apply_drives(m, q, t)
+        self._q_p[:] = q
+        u_p = 0.0
         inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
         nf = m.nfree
         rf = np.zeros(m.nsys)
         for it in range(1, spec.max_iterations + 1):
-            assemble(m, ws, q, lam, True, state.mult)
+            strain = assemble(m, ws, q, lam, True, state.mult)
+            if it == 1:
+                u_p = strain
+                if m.n_multipliers:
+                    self._c_p[:] = ws.rc
             rf[:nf] = (ws.r - ws.f_ext)[free]
             rf[nf:] = ws.rc
             if not np.all(np.isfinite(rf)):
@@ -91,5 +101,25 @@ class StaticSolver:
         strain = assemble(m, ws, q, lam, False, state.mult)
         rf = (ws.r - ws.f_ext)[free]
         ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+        rel = float(np.linalg.norm(rf) / ref)
         _, grav = energies(m, state)
-        return StepResult(True, it, float(np.linalg.norm(rf) / ref), inc, 1, 0.0, strain, grav)
+        if self.guard.enabled:
+            flag, why = self._guard(state, u_p, strain)
+            if flag:
+                self.guard.rejections += 1
+                return StepResult(False, it, rel, inc, 1, 0.0, strain, grav, message=why, guard=flag)
+        return StepResult(True, it, rel, inc, 1, 0.0, strain, grav)
+
+    def _guard(self, state: State, u_p: float, u_end: float) -> tuple[str, str]:
+        """The step guard on the converged ``state.q`` (statics: ``Φ = U − f_ext·q`` + moments and
+        multiplier terms, from the Newton start): ``('', '')`` or (flag, reason)."""
+        m, ws, g = self.model, self.ws, self.guard
+        q = state.q
+        flag, why = g.orientation(q, state.lam)
+        if flag:
+            return flag, why
+        dq = q - self._q_p
+        w_ext = float(ws.f_ext @ dq)
+        w_mom = g.moment_work(q, self._q_p, ws.follower_scale, ws.cons_scale)
+        w_mult = float(state.mult @ (ws.rc - self._c_p)) if m.n_multipliers else 0.0
+        return g.potential_rise((-w_ext, -w_mom, w_mult), u_p, u_end, g.resolution(ws.r, ws.f_ext))

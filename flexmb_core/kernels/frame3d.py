@@ -332,14 +332,286 @@ def frame_element(qe, ve, dax, dsec, w, nsec, mat, lam, lam_rate, c_v, want_k, w
     return energy, dudlam, diss
 
 
+# Block recipes of the straight element's tangent (see straight_frame_element): for row and
+# column vector types (Y, V1, V2) of a node pair, the station accumulators that enter, with the
+# factor kind (0: u_l·u_m, 1: u_l·φ_m, 2: φ_l·u_m, 3: φ_l·φ_m) and whether the 3×3 accumulator
+# enters transposed. Accumulators: 0 M0, 1 M1, 2 M2, 3 M11, 4 M12, 5 M22 (H00 times 1, s1, s2,
+# s1², s1 s2, s2²), 6–8 H01 × (1, s1, s2), 9–11 H02 × (1, s1, s2), 12 H11, 13 H12, 14 H22.
+_BLOCK = np.array([
+    [[0, 0, 0], [-1, 0, 0], [-1, 0, 0], [-1, 0, 0]],          # Y,  Y
+    [[1, 0, 0], [6, 1, 0], [-1, 0, 0], [-1, 0, 0]],           # Y,  V1
+    [[2, 0, 0], [9, 1, 0], [-1, 0, 0], [-1, 0, 0]],           # Y,  V2
+    [[1, 0, 0], [6, 2, 1], [-1, 0, 0], [-1, 0, 0]],           # V1, Y
+    [[3, 0, 0], [7, 1, 0], [7, 2, 1], [12, 3, 0]],            # V1, V1
+    [[4, 0, 0], [10, 1, 0], [8, 2, 1], [13, 3, 0]],           # V1, V2
+    [[2, 0, 0], [9, 2, 1], [-1, 0, 0], [-1, 0, 0]],           # V2, Y
+    [[4, 0, 0], [8, 1, 0], [10, 2, 1], [13, 3, 1]],           # V2, V1
+    [[5, 0, 0], [11, 1, 0], [11, 2, 1], [14, 3, 0]],          # V2, V2
+], dtype=np.int64)
+
+
+@njit(cache=True)
+def straight_frame_element(qe, phi_st, dphi_st, s_pt, w, nsec, mat, lam, want_k, blocks, fp, ep, gbar, hacc,
+                           gacc, tk, tg, re, ke):
+    """Residual, tangent and energy of one straight, undamped frame element, from the structure
+    of its kinematics (the same integrals as :func:`frame_element`, in fewer operations).
+
+    For a straight element with constant section vectors, ``A⁰ = R₀ diag(|X'|, 1, 1)``, so ``D̃``
+    has two non-zeros per row and the deformation gradient is affine in the section coordinates:
+    ``F̃(s) = [(Y' + s₁V₁' + s₂V₂')/λ, V̄₁, V̄₂]`` from five vectors per axial station
+    (``Y' = Σφ'Y/|X'|`` etc., ``V̄ = ΣφV``). Each section point then costs O(10²) flops instead of
+    O(10³); the section sums go into station accumulators (``H_jl = Σ_k C_k G_kj G_klᵀ`` times the
+    monomials 1, s₁, s₂, s₁², s₁s₂, s₂²; ``S_jl`` likewise for the geometric part), from which
+    the 3×3 node blocks of the tangent follow (``_BLOCK``). The station shear split is the
+    general kernel's. Same parameters as :func:`frame_element` except:
+
+    phi_st, dphi_st : (nst, n) — φ_ℓ and φ'_ℓ/|X'| (1/m) at the axial stations.
+    s_pt : (nip, 2) — section coordinates (s₁, s₂) of the points (m).
+    blocks : (9, 4, 3) int64 — ``_BLOCK``.
+    fp : (nip, 3, 3), ep : (nip, 6), gbar : (2, 9n) — scratch (F̃ and E at the points, the
+        shear-split gradients).
+    hacc : (15, 3, 3), gacc : (15,) — scratch (station accumulators).
+    tk : (9, 4, 3, 3), tg : (9, 4) — scratch (the accumulators combined per block kind).
+
+    Returns the strain energy (J).
+    """
+    nip = w.shape[0]
+    nn = phi_st.shape[1]
+    nloc = 9 * nn
+    e_ax = mat[0]
+    e_t = mat[1]
+    g_pt = mat[2] * mat[4]
+    g_t = mat[3]
+    c_st = mat[2] * (mat[5] - mat[4])
+    inv = 1.0 / lam
+    re[:] = 0.0
+    if want_k:
+        ke[:, :] = 0.0
+    energy = 0.0
+    nst = nip // nsec
+    for st in range(nst):
+        p0 = st * nsec
+        # five station vectors: Y', V1', V2' (per |X'|) and V̄1, V̄2
+        yp0 = 0.0; yp1 = 0.0; yp2 = 0.0
+        a10 = 0.0; a11 = 0.0; a12 = 0.0
+        a20 = 0.0; a21 = 0.0; a22 = 0.0
+        b10 = 0.0; b11 = 0.0; b12 = 0.0
+        b20 = 0.0; b21 = 0.0; b22 = 0.0
+        for l in range(nn):
+            dp = dphi_st[st, l]
+            ph = phi_st[st, l]
+            k = 9 * l
+            yp0 += dp * qe[k]; yp1 += dp * qe[k + 1]; yp2 += dp * qe[k + 2]
+            a10 += dp * qe[k + 3]; a11 += dp * qe[k + 4]; a12 += dp * qe[k + 5]
+            a20 += dp * qe[k + 6]; a21 += dp * qe[k + 7]; a22 += dp * qe[k + 8]
+            b10 += ph * qe[k + 3]; b11 += ph * qe[k + 4]; b12 += ph * qe[k + 5]
+            b20 += ph * qe[k + 6]; b21 += ph * qe[k + 7]; b22 += ph * qe[k + 8]
+        wsum = 0.0
+        g01 = 0.0
+        g02 = 0.0
+        for p in range(p0, p0 + nsec):
+            s1 = s_pt[p, 0]
+            s2 = s_pt[p, 1]
+            f00 = (yp0 + s1 * a10 + s2 * a20) * inv
+            f10 = (yp1 + s1 * a11 + s2 * a21) * inv
+            f20 = (yp2 + s1 * a12 + s2 * a22) * inv
+            fp[p, 0, 0] = f00; fp[p, 1, 0] = f10; fp[p, 2, 0] = f20
+            fp[p, 0, 1] = b10; fp[p, 1, 1] = b11; fp[p, 2, 1] = b12
+            fp[p, 0, 2] = b20; fp[p, 1, 2] = b21; fp[p, 2, 2] = b22
+            ep[p, 0] = 0.5 * (f00 * f00 + f10 * f10 + f20 * f20 - 1.0)
+            ep[p, 1] = 0.5 * (b10 * b10 + b11 * b11 + b12 * b12 - 1.0)
+            ep[p, 2] = 0.5 * (b20 * b20 + b21 * b21 + b22 * b22 - 1.0)
+            ep[p, 3] = 0.5 * (f00 * b10 + f10 * b11 + f20 * b12)
+            ep[p, 4] = 0.5 * (f00 * b20 + f10 * b21 + f20 * b22)
+            ep[p, 5] = 0.5 * (b10 * b20 + b11 * b21 + b12 * b22)
+            wl = w[p] * lam
+            wsum += wl
+            g01 += wl * 2.0 * ep[p, 3]
+            g02 += wl * 2.0 * ep[p, 4]
+        g01 /= wsum
+        g02 /= wsum
+        energy += 0.5 * c_st * wsum * (g01 * g01 + g02 * g02)
+        tau01 = c_st * g01
+        tau02 = c_st * g02
+        r00 = 0.0; r01 = 0.0; r02 = 0.0          # Σ w P[:,0], Σ w s1 P[:,0], Σ w s2 P[:,0], Σ w P[:,1], Σ w P[:,2]
+        r10 = 0.0; r11 = 0.0; r12 = 0.0
+        r20 = 0.0; r21 = 0.0; r22 = 0.0
+        t10 = 0.0; t11 = 0.0; t12 = 0.0
+        t20 = 0.0; t21 = 0.0; t22 = 0.0
+        fw0 = 0.0; fw1 = 0.0; fw2 = 0.0           # Σ w f0, Σ w s1, Σ w s2 (shear split)
+        sw1 = 0.0
+        sw2 = 0.0
+        if want_k:
+            hacc[:, :, :] = 0.0
+            gacc[:] = 0.0
+        for p in range(p0, p0 + nsec):
+            s1 = s_pt[p, 0]
+            s2 = s_pt[p, 1]
+            wl = w[p] * lam
+            e00 = ep[p, 0]
+            e11 = ep[p, 1]
+            e22 = ep[p, 2]
+            y01 = 2.0 * ep[p, 3]
+            y02 = 2.0 * ep[p, 4]
+            y12 = 2.0 * ep[p, 5]
+            energy += wl * 0.5 * (e_ax * e00 * e00 + e_t * (e11 * e11 + e22 * e22)
+                                  + g_pt * (y01 * y01 + y02 * y02) + g_t * y12 * y12)
+            s00 = e_ax * e00
+            s11 = e_t * e11
+            s22 = e_t * e22
+            s01 = g_pt * y01 + tau01
+            s02 = g_pt * y02 + tau02
+            s12 = g_t * y12
+            f00 = fp[p, 0, 0]; f10 = fp[p, 1, 0]; f20 = fp[p, 2, 0]
+            # P = F̃ S by columns: P[:, j] = Σ_k f_k S_kj
+            q00 = f00 * s00 + b10 * s01 + b20 * s02
+            q10 = f10 * s00 + b11 * s01 + b21 * s02
+            q20 = f20 * s00 + b12 * s01 + b22 * s02
+            q01 = f00 * s01 + b10 * s11 + b20 * s12
+            q11 = f10 * s01 + b11 * s11 + b21 * s12
+            q21 = f20 * s01 + b12 * s11 + b22 * s12
+            q02 = f00 * s02 + b10 * s12 + b20 * s22
+            q12 = f10 * s02 + b11 * s12 + b21 * s22
+            q22 = f20 * s02 + b12 * s12 + b22 * s22
+            r00 += wl * q00; r01 += wl * q10; r02 += wl * q20
+            r10 += wl * s1 * q00; r11 += wl * s1 * q10; r12 += wl * s1 * q20
+            r20 += wl * s2 * q00; r21 += wl * s2 * q10; r22 += wl * s2 * q20
+            t10 += wl * q01; t11 += wl * q11; t12 += wl * q21
+            t20 += wl * q02; t21 += wl * q12; t22 += wl * q22
+            if want_k:
+                fw0 += wl * f00; fw1 += wl * f10; fw2 += wl * f20
+                sw1 += wl * s1
+                sw2 += wl * s2
+                c0 = wl * e_ax
+                c1 = wl * e_t
+                c3 = wl * g_pt
+                c5 = wl * g_t
+                mono = (1.0, s1, s2, s1 * s1, s1 * s2, s2 * s2)
+                fv = (f00, f10, f20)
+                b1 = (b10, b11, b12)
+                b2 = (b20, b21, b22)
+                for i in range(3):
+                    for j in range(3):
+                        ff = fv[i] * fv[j]
+                        g11 = b1[i] * b1[j]
+                        g22 = b2[i] * b2[j]
+                        h00 = c0 * ff + c3 * (g11 + g22)
+                        for mm in range(6):
+                            hacc[mm, i, j] += mono[mm] * h00
+                        h01 = c3 * b1[i] * fv[j]
+                        h02 = c3 * b2[i] * fv[j]
+                        hacc[6, i, j] += h01
+                        hacc[7, i, j] += s1 * h01
+                        hacc[8, i, j] += s2 * h01
+                        hacc[9, i, j] += h02
+                        hacc[10, i, j] += s1 * h02
+                        hacc[11, i, j] += s2 * h02
+                        hacc[12, i, j] += c1 * g11 + c3 * ff + c5 * g22
+                        hacc[13, i, j] += c5 * b2[i] * b1[j]
+                        hacc[14, i, j] += c1 * g22 + c3 * ff + c5 * g11
+                for mm in range(6):
+                    gacc[mm] += wl * mono[mm] * s00
+                gacc[6] += wl * s01
+                gacc[7] += wl * s1 * s01
+                gacc[8] += wl * s2 * s01
+                gacc[9] += wl * s02
+                gacc[10] += wl * s1 * s02
+                gacc[11] += wl * s2 * s02
+                gacc[12] += wl * s11
+                gacc[13] += wl * s12
+                gacc[14] += wl * s22
+        # residual: Y rows take P[:,0]·φ'/|X'|λ, V rows add s·P[:,0] and P[:,1|2]·φ
+        for l in range(nn):
+            u = dphi_st[st, l] * inv
+            ph = phi_st[st, l]
+            k = 9 * l
+            re[k] += u * r00; re[k + 1] += u * r01; re[k + 2] += u * r02
+            re[k + 3] += u * r10 + ph * t10; re[k + 4] += u * r11 + ph * t11; re[k + 5] += u * r12 + ph * t12
+            re[k + 6] += u * r20 + ph * t20; re[k + 7] += u * r21 + ph * t21; re[k + 8] += u * r22 + ph * t22
+        if want_k:
+            # per vector-type pair (ta, tb) and factor kind (u_l u_m, u_l φ_m, φ_l u_m, φ_l φ_m): the
+            # 3×3 matrix that the factor multiplies, geometric part (scalar × I₃) included
+            tk[:, :, :, :] = 0.0
+            tg[:, :] = 0.0
+            for bt in range(9):
+                for z in range(4):
+                    idx = blocks[bt, z, 0]
+                    if idx < 0:
+                        break
+                    kind = blocks[bt, z, 1]
+                    tg[bt, kind] += gacc[idx]
+                    if blocks[bt, z, 2] == 0:
+                        for i in range(3):
+                            for j in range(3):
+                                tk[bt, kind, i, j] += hacc[idx, i, j]
+                    else:
+                        for i in range(3):
+                            for j in range(3):
+                                tk[bt, kind, i, j] += hacc[idx, j, i]
+                for kind in range(4):
+                    for i in range(3):
+                        tk[bt, kind, i, i] += tg[bt, kind]
+            for l in range(nn):
+                ul = dphi_st[st, l] * inv
+                pl = phi_st[st, l]
+                for m in range(l, nn):
+                    um = dphi_st[st, m] * inv
+                    pm = phi_st[st, m]
+                    f0 = ul * um
+                    f1 = ul * pm
+                    f2 = pl * um
+                    f3 = pl * pm
+                    for ta in range(3):
+                        ra = 9 * l + 3 * ta
+                        tb0 = ta if m == l else 0         # lower blocks: mirrored at the end
+                        for tb in range(tb0, 3):
+                            cb = 9 * m + 3 * tb
+                            bt = 3 * ta + tb
+                            for i in range(3):
+                                for j in range(3):
+                                    ke[ra + i, cb + j] += (f0 * tk[bt, 0, i, j] + f1 * tk[bt, 1, i, j]
+                                                           + f2 * tk[bt, 2, i, j] + f3 * tk[bt, 3, i, j])
+            if c_st != 0.0:
+                # station shear split: rank two, with ∂(Σ w γ01)/∂q and ∂(Σ w γ02)/∂q from the
+                # station sums (the general kernel's gbar)
+                for l in range(nn):
+                    ul = dphi_st[st, l] * inv
+                    pl = phi_st[st, l]
+                    k = 9 * l
+                    gbar[0, k] = ul * wsum * b10; gbar[0, k + 1] = ul * wsum * b11; gbar[0, k + 2] = ul * wsum * b12
+                    gbar[0, k + 3] = pl * fw0 + ul * sw1 * b10
+                    gbar[0, k + 4] = pl * fw1 + ul * sw1 * b11
+                    gbar[0, k + 5] = pl * fw2 + ul * sw1 * b12
+                    gbar[0, k + 6] = ul * sw2 * b10; gbar[0, k + 7] = ul * sw2 * b11; gbar[0, k + 8] = ul * sw2 * b12
+                    gbar[1, k] = ul * wsum * b20; gbar[1, k + 1] = ul * wsum * b21; gbar[1, k + 2] = ul * wsum * b22
+                    gbar[1, k + 3] = ul * sw1 * b20; gbar[1, k + 4] = ul * sw1 * b21; gbar[1, k + 5] = ul * sw1 * b22
+                    gbar[1, k + 6] = pl * fw0 + ul * sw2 * b20
+                    gbar[1, k + 7] = pl * fw1 + ul * sw2 * b21
+                    gbar[1, k + 8] = pl * fw2 + ul * sw2 * b22
+                cw = c_st / wsum
+                for r in range(nloc):
+                    g0 = cw * gbar[0, r]
+                    g1 = cw * gbar[1, r]
+                    for c in range(r, nloc):
+                        ke[r, c] += g0 * gbar[0, c] + g1 * gbar[1, c]
+    if want_k:
+        for r in range(nloc):
+            for c in range(r + 1, nloc):
+                ke[c, r] = ke[r, c]
+    return energy
+
+
 @njit(cache=True)
 def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_v, smap, want_k,
-                want_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn):
+                want_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn,
+                straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg):
     """Loop over one frame group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.
 
     ``v (ndof,)`` rates of the unknowns (read only for damped elements); ``edofs (ne, 9n)`` global
     DOF ids; ``act (ne,)`` actuator id or −1; ``lam_act, lam_rate`` stretch and stretch rate per
     actuator; ``smap (ne, (9n)²)`` position of each local entry in ``kdata`` (−1: prescribed).
+    ``straight … gacc`` (:func:`frame_structure`): elements flagged straight (and undamped) go
+    through :func:`straight_frame_element`, the others through :func:`frame_element`.
     ``want_dlam`` must be passed in (False) rather than written as a literal: a literal constant
     in a call between njit functions is typed ``Literal[bool]`` and compiles a second signature.
     Returns the group's strain energy (J) and dissipated power (W).
@@ -359,8 +631,13 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
         if act[e] >= 0:
             lam = lam_act[act[e]]
             lrate = lam_rate[act[e]]
-        u, _, de = frame_element(qe, ve, dax[e], dsec[e], w[e], nsec, mat[e], lam, lrate, c_v, want_k,
-                                 want_dlam, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, re, ke, kn)
+        if straight[e] == 1:
+            u = straight_frame_element(qe, phi_st[e], dphi_st[e], s_pt[e], w[e], nsec, mat[e], lam, want_k,
+                                       blocks, fp, ep, gbar, hacc, gacc, tk, tg, re, ke)
+            de = 0.0
+        else:
+            u, _, de = frame_element(qe, ve, dax[e], dsec[e], w[e], nsec, mat[e], lam, lrate, c_v, want_k,
+                                     want_dlam, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, re, ke, kn)
         energy += u
         diss += de
         for i in range(nloc):
@@ -401,3 +678,49 @@ def frame_scratch(nip: int, nv: int) -> tuple[np.ndarray, ...]:
             np.zeros((nip, 6)), np.zeros((6, nloc)), np.zeros((6, nloc)), np.zeros((2, nloc)),
             np.zeros((2, nloc)), np.zeros(nloc), np.zeros(nloc), np.zeros(nloc), np.zeros((nloc, nloc)),
             np.zeros((nloc, nloc)))
+
+
+def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
+    """Per-group data of :func:`straight_frame_element` (computed once per model, from the
+    group's own integration data): ``(straight (ne,) int64, phi_st (ne, nst, n), dphi_st (ne, nst,
+    n), s_pt (ne, nip, 2), _BLOCK, hacc (15, 3, 3), gacc (15,), tk (9, 4, 3, 3), tg (9, 4))``.
+
+    An element is flagged straight when its ``D̃`` has the structure of a straight element with
+    constant section vectors (``d_Y = [φ'/|X'|, 0, 0]``, ``d_V1 = [s₁φ'/|X'|, φ, 0]``, ``d_V2 =
+    [s₂φ'/|X'|, 0, φ]`` at every point, to 1e-12 of its largest entry) and it is undamped;
+    curved and damped elements keep :func:`frame_element`. ``structured=False`` flags none.
+    """
+    ne, nip, nv, _ = g.dax.shape
+    n = nv // 3
+    nsec = g.nsec
+    nst = nip // nsec
+    straight = np.zeros(ne, dtype=np.int64)
+    phi_st = np.zeros((ne, nst, n))
+    dphi_st = np.zeros((ne, nst, n))
+    s_pt = np.zeros((ne, nip, 2))
+    for e in range(ne if structured else 0):
+        dax, dsec = g.dax[e], g.dsec[e]
+        tol = 1e-12 * max(np.abs(dax).max(), np.abs(dsec).max())
+        ok = g.mat[e, 6] == 0.0 and np.abs(dax[:, :, 1:]).max() <= tol and np.abs(dsec[:, :, 0]).max() <= tol
+        ok = ok and np.abs(dsec[:, 0::3, :]).max() <= tol
+        ok = ok and np.abs(dsec[:, 1::3, 2]).max() <= tol and np.abs(dsec[:, 2::3, 1]).max() <= tol
+        for st in range(nst):
+            if not ok:
+                break
+            pts = slice(st * nsec, (st + 1) * nsec)
+            dp = dax[st * nsec, 0::3, 0]
+            ph = dsec[st * nsec, 1::3, 1]
+            ok = (np.abs(dax[pts, 0::3, 0] - dp).max() <= tol and np.abs(dsec[pts, 1::3, 1] - ph).max() <= tol
+                  and np.abs(dsec[pts, 2::3, 2] - ph).max() <= tol)
+            nrm = float(dp @ dp)
+            for p in range(st * nsec, (st + 1) * nsec):
+                s1 = float(dax[p, 1::3, 0] @ dp) / nrm
+                s2 = float(dax[p, 2::3, 0] @ dp) / nrm
+                ok = ok and (np.abs(dax[p, 1::3, 0] - s1 * dp).max() <= tol
+                             and np.abs(dax[p, 2::3, 0] - s2 * dp).max() <= tol)
+                s_pt[e, p] = (s1, s2)
+            phi_st[e, st] = ph
+            dphi_st[e, st] = dp
+        straight[e] = 1 if ok else 0
+    return (straight, phi_st, dphi_st, s_pt, _BLOCK, np.zeros((15, 3, 3)), np.zeros(15), np.zeros((9, 4, 3, 3)),
+            np.zeros((9, 4)))

@@ -86,9 +86,9 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
     c_v = float(c_v)
     energy = 0.0
     diss = 0.0
-    for g, sc in zip(model.frame_groups, ws.frame_scratch):
+    for g, sc, st in zip(model.frame_groups, ws.frame_scratch, ws.frame_structure):
         u, dp = frame_group(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, lam_rate, c_v, g.smap,
-                            want_k, False, ws.r, ws.kdata, *sc)
+                            want_k, False, ws.r, ws.kdata, *sc, *st)
         energy += u
         diss += dp
     if model.truss is not None:

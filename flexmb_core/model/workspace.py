@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kernels.frame3d import frame_scratch
+from ..kernels.frame3d import frame_scratch, frame_structure
 from ..kernels.shell import shell_scratch
 from .model import Model
 
@@ -66,6 +66,8 @@ class Workspace:
         self.kdata = np.zeros(model.nnz)
         self.f_ext = np.zeros(n)
         self.frame_scratch = [frame_scratch(g.w.shape[1], g.dax.shape[2]) for g in model.frame_groups]
+        # straight-element structure per frame group (which elements take the fast kernel)
+        self.frame_structure = [frame_structure(g) for g in model.frame_groups]
         self.truss_scratch = (np.zeros(6), np.zeros(6), np.zeros(6), np.zeros((6, 6)))   # qe, ve, re, ke
         self.shell_scratch = shell_scratch() if model.shell_groups else None
         self.zero_v = np.zeros(n)                   # rates of an undamped evaluation (statics, modes)

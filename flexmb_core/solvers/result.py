@@ -18,6 +18,10 @@ class StepResult:
     substeps : int — 1 unless the step was split after a failure.
     kinetic, strain, gravity : float — energies at the end of the step (J).
     message : str — why a step failed or was split ('' when all went well).
+    guard : str — set when the step guard refused a converged Newton root in this step (the
+        step failed, or was split after it): ``'energy'`` (the root raised the step's incremental
+        potential), ``'inverted'`` (a frame section turned inside out), ``'svk_limit'`` (a fibre
+        compressed past the Saint-Venant–Kirchhoff limit point); '' otherwise.
     """
 
     converged: bool
@@ -29,6 +33,7 @@ class StepResult:
     strain: float = 0.0
     gravity: float = 0.0
     message: str = ""
+    guard: str = ""
 
     @property
     def total_energy(self) -> float:

@@ -34,8 +34,10 @@ def retry_in_pieces(failed: StepResult, piece: Callable[[int, int, np.ndarray], 
             sub.iterations = iters
             sub.substeps = nsub
             sub.message = f"split into {nsub} {what} after: {failed.message}"
+            sub.guard = failed.guard or sub.guard
             return sub
     state.assign(backup)
     failed.iterations = iters
-    failed.message = f"no convergence even with {2 ** levels} {what}: {failed.message}"
+    failed.message = (f"{'no acceptable root' if failed.guard else 'no convergence'} even with "
+                      f"{2 ** levels} {what}: {failed.message}")
     return failed

@@ -8,8 +8,10 @@ import numba
 import pytest
 
 import flexmb_core.integrators.energy as energy_mod
+import flexmb_core.integrators.fast as fast_mod
 import flexmb_core.kernels.constraints as constraints_mod
 import flexmb_core.kernels.frame3d as frame_mod
+import flexmb_core.kernels.guard as guard_mod
 import flexmb_core.kernels.moments as moments_mod
 import flexmb_core.kernels.scatter as scatter_mod
 import flexmb_core.kernels.shell as shell_mod
@@ -19,7 +21,8 @@ from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod, shell_mod)
+MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod, shell_mod, guard_mod,
+           fast_mod)
 
 
 def _kernels():

@@ -84,6 +84,7 @@ def test_rigid_corner_transmits_bending_and_torsion_in_statics():
     stiff_section = dataclasses.replace(model.frame_groups[0], mat=np.array(mat[None, :].repeat(
         model.frame_groups[0].mat.shape[0], axis=0)))
     stiff_section.mat[:, 3] *= 1e3
+    stiff_section.mat.setflags(write=False)     # as the model's arrays: the same compiled kernel signature
     sim2 = Simulator(dataclasses.replace(model, frame_groups=(stiff_section,)))
     sim2.initialize()
     sim2.run(1.0)
