@@ -217,7 +217,7 @@ def free_beam(integrator: str, dt: float, until: float = 1.0) -> dict:
 
 # -- report --------------------------------------------------------------------------------------
 DIAGNOSIS = """
-- **Spurious Newton roots, accepted as converged.** At 3× spin-up with the scene's step (and with
+- **Spurious Newton roots, accepted as converged (before the step guard).** At 3× spin-up with the scene's step (and with
   ρ∞ = 0.9, or Δt = 0.01 s), and for the trapezoidal rule on the free tumbling beam at Δt = 1 ms,
   the undamped or lightly damped high-frequency section modes (ωΔt ≫ 1) grow in the fast rotation:
   Newton needs more and more iterations, steps start to be split, and then one step converges —
@@ -226,10 +226,12 @@ DIAGNOSIS = """
   accepted and published; the run stops with a ConvergenceError 1–4 steps later. The same kind of
   root is reached by statics from a bad initial guess given enough iterations: folded beams whose
   inverted segments (Y′·(V1 × V2) < 0) carry no Green–Lagrange strain, hence no SVK energy.
-  A guard in the step acceptance would turn these into recorded failures (then the sub-step policy
-  applies): reject a converged step whose energy rises by more than the external and actuator work
-  can explain, or in which a section's orientation flips or |V_i| leaves 1 by more than a strain
-  bound. Reproductions: the `xfail` tests of `tests/verification/test_hard_cases.py`.
+  A step guard now does this (`flexmb_core/solvers/guard.py`, since the report below was measured):
+  a converged step whose section orientation flips (det F ≤ 0), whose fibre stretch falls below the
+  SVK limit 1/√3, whose incremental potential rises, or whose energy gain exceeds the work of loads
+  and drives is refused and handed to the sub-stepping policy, and the refusal is recorded. The
+  former `xfail` tests of `tests/verification/test_hard_cases.py` now assert that; the 'silent
+  spurious steps' column above is the unguarded solver's (rerun this script to regenerate).
 - **Remedies that work today** for the spin-up: Δt = 0.005 s (ρ∞ = 0.8: exact stretch to 0.07 %) or
   ρ∞ = 0.5 at Δt = 0.02 s (stable, but the late stretch is 17 % low and the tip keeps a 0.14 m
   vibration: too much numerical damping for a reference). For the free beam: generalized-α.
