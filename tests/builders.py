@@ -78,3 +78,17 @@ def extended_tangent_error(model, sim, q, mult, lam=None, h: float = 1e-6) -> fl
             mm[j - model.nfree] -= h
         kfd[:, j] = (system_residual(qp, mp) - system_residual(qm, mm)) / (2 * h)
     return float(np.abs(k - kfd).max() / np.abs(k).max())
+
+
+def free_beam(eta: float = 0.0, **solver) -> dict:
+    """A free steel beam (1 m, 20 × 40 mm, 4 cubic elements), no supports, no gravity: the hard
+    cases' tumbling beam. ``solver`` entries go into the scene's solver block."""
+    return {"name": "free_beam",
+            "materials": {"steel": {"E": 2.0e11, "nu": 0.3, "rho": 7850.0, "eta": eta}},
+            "sections": {"s": {"shape": "rectangle", "width": 0.02, "height": 0.04}},
+            "nodes": {"a": [0.0, 0.0, 0.0], "b": [1.0, 0.0, 0.0]},
+            "members": {"beam": {"kind": "frame", "from": "a", "to": "b", "elements": 4, "order": 3,
+                                 "material": "steel", "section": "s", "up": [0, 0, 1]}},
+            "supports": [], "loads": {},
+            "solver": {"analysis": "dynamic", "until": 1.0, **solver},
+            "outputs": {"e": {"kind": "energy"}}}

@@ -97,14 +97,10 @@ def step_work(q, q_n, f_ext, f_prev, r_int, a, v, c_m, m_indptr, m_indices, m_da
         d = q[i] - q_n[i]
         if d != 0.0:
             w_ext += 0.5 * (f_ext[i] + f_prev[i]) * d
+    drive_reactions(r_int, a, v, c_m, m_indptr, m_indices, m_data, f_ext, drive_ids, react)
     w_drv = 0.0
     for k in range(drive_ids.size):
         i = drive_ids[k]
-        s = 0.0
-        for p in range(m_indptr[i], m_indptr[i + 1]):
-            j = m_indices[p]
-            s += m_data[p] * (a[j] + c_m * v[j])
-        react[k] = r_int[i] + s - f_ext[i]
         w_drv += 0.5 * (react_prev[k] + react[k]) * (q[i] - q_n[i])
     return w_ext, w_drv
 

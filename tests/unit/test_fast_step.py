@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from builders import build, cantilever
+from builders import build, cantilever, free_beam
 from flexmb_core.integrators.fast import FastFrameStep
 
 
@@ -26,17 +26,7 @@ def _b1(newton="modified", integrator="generalized_alpha", gravity=False):
 
 
 def _tumbling():
-    d = {"name": "free_beam",
-         "materials": {"steel": {"E": 2.0e11, "nu": 0.3, "rho": 7850.0}},
-         "sections": {"s": {"shape": "rectangle", "width": 0.02, "height": 0.04}},
-         "nodes": {"a": [0.0, 0.0, 0.0], "b": [1.0, 0.0, 0.0]},
-         "members": {"beam": {"kind": "frame", "from": "a", "to": "b", "elements": 4, "order": 3,
-                              "material": "steel", "section": "s", "up": [0, 0, 1]}},
-         "supports": [], "loads": {},
-         "solver": {"analysis": "dynamic", "integrator": "newmark", "dt": 1e-3, "until": 1.0,
-                    "tolerance": 1e-10},
-         "outputs": {"e": {"kind": "energy"}}}
-    return d
+    return free_beam(integrator="newmark", dt=1e-3, tolerance=1e-10)
 
 
 def _spin_tumble(model, sim):

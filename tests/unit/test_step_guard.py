@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from builders import build, cantilever
+from builders import build, cantilever, free_beam
 from flexmb_core.kernels.guard import conservative_moment_work
 from flexmb_core.solvers.guard import SVK_LIMIT_STRETCH, StepGuard
 
@@ -111,16 +111,7 @@ def test_refused_root_with_policy_accept_flagged_keeps_it_flagged():
 def _tumbling_trapezoidal(policy):
     """The free tumbling beam of the hard cases under the trapezoidal rule at Δt = 1 ms: Newton
     converges onto a spurious root at step 126."""
-    d = {"name": "free_beam",
-         "materials": {"steel": {"E": 2.0e11, "nu": 0.3, "rho": 7850.0}},
-         "sections": {"s": {"shape": "rectangle", "width": 0.02, "height": 0.04}},
-         "nodes": {"a": [0.0, 0.0, 0.0], "b": [1.0, 0.0, 0.0]},
-         "members": {"beam": {"kind": "frame", "from": "a", "to": "b", "elements": 4, "order": 3,
-                              "material": "steel", "section": "s", "up": [0, 0, 1]}},
-         "supports": [], "loads": {},
-         "solver": {"analysis": "dynamic", "integrator": "newmark", "dt": 1e-3, "until": 1.0,
-                    "tolerance": 1e-10, "on_unconverged": policy},
-         "outputs": {"e": {"kind": "energy"}}}
+    d = free_beam(integrator="newmark", dt=1e-3, tolerance=1e-10, on_unconverged=policy)
     model, sim = build(d)
     omega, centre = np.array([0.0, 3.0, 20.0]), np.array([0.5, 0.0, 0.0])
     q, v = sim.state.q, sim.state.v

@@ -30,7 +30,7 @@ import pytest
 from scipy.optimize import brentq, fsolve
 from scipy.special import ellipe, ellipk
 
-from builders import build, cantilever
+from builders import build, cantilever, free_beam
 from flexmb_core.errors import ConvergenceError
 from flexmb_core.integrators.energy import csr_matvec
 from flexmb_core.model.compile import compile_scene
@@ -467,16 +467,7 @@ def test_1e5_steps_of_the_stewart_twin_have_bounded_energy(eta):
 def _free_beam(integrator: str, dt: float, eta: float = 0.0, tolerance: float = 1e-10):
     """A free steel beam (1 m, 20 × 40 mm, 4 cubic elements), no supports, no gravity, tumbling
     about an oblique axis (ω = (0, 3, 20) rad/s) with a bending velocity 0.5 cos(πx) m/s."""
-    d = {"name": "free_beam",
-         "materials": {"steel": {"E": 2.0e11, "nu": 0.3, "rho": 7850.0, "eta": eta}},
-         "sections": {"s": {"shape": "rectangle", "width": 0.02, "height": 0.04}},
-         "nodes": {"a": [0.0, 0.0, 0.0], "b": [1.0, 0.0, 0.0]},
-         "members": {"beam": {"kind": "frame", "from": "a", "to": "b", "elements": 4, "order": 3,
-                              "material": "steel", "section": "s", "up": [0, 0, 1]}},
-         "supports": [], "loads": {},
-         "solver": {"analysis": "dynamic", "integrator": integrator, "dt": dt, "until": 1.0,
-                    "rho_inf": 0.9, "tolerance": tolerance},
-         "outputs": {"e": {"kind": "energy"}}}
+    d = free_beam(eta, integrator=integrator, dt=dt, rho_inf=0.9, tolerance=tolerance)
     model, sim = build(d)
     blocks = _frame_blocks(model)
     omega = np.array([0.0, 3.0, 20.0])
