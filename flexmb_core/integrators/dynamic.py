@@ -131,8 +131,10 @@ class DynamicIntegrator:
         """Compile (or load) the numba step on a throwaway copy of ``state``; :meth:`initialize`
         then resets what it touched (held tangent, loads, the guard's ledger)."""
         if self.fast is not None:
-            self.fast.attempt(state.copy(), self.spec.dt)
+            st = state.copy()
+            self.fast.attempt(st, self.spec.dt, st.lam.copy())
             self.fast.invalidate()
+            self._t_hist = math.nan         # no stretch history from the throwaway step
             self._factored_coef = None
             self._tangent_age = 0
             self.tangent_updates = 0
@@ -179,7 +181,7 @@ class DynamicIntegrator:
         """
         if self._backup is None:
             self._backup = state.copy()
-        res = self.fast.attempt(state, dt) if self.fast is not None else None
+        res = self.fast.attempt(state, dt, lam_new, lam_rate) if self.fast is not None else None
         if res is None:
             self._backup.assign(state)
             res = self._newton(state, dt, lam_new, lam_rate)

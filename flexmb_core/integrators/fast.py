@@ -26,15 +26,16 @@ import math
 import numpy as np
 from numba import njit
 
-from ..kernels.frame3d import frame_group
+from ..kernels.frame3d import frame_group, frame_scratch, frame_structure
 from ..kernels.guard import dynamic_guard, frame_orientation
-from ..model.model import Model
+from ..kernels.truss import truss_group
+from ..model.model import FrameGroup, Model, TrussGroup
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
 from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies
-from .fused import apply_increment, inertial_residual, update_rates
+from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
 
 # Return codes of frame_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
@@ -44,28 +45,31 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, 
 # their one compiled signature) and the step constants. Read-only int pack ``ci``. Writable float
 # pack ``wf``: arrays the Python path passes writable (copies) and the step's scratch. Writable
 # int pack ``wi``: the skyline LU's symbolic structure and other writable index arrays.
-(L_DSCALE, L_Q0, L_GRAV, L_DAX, L_DSEC, L_W, L_MAT, L_PAR, L_MV,                 # cf
- L_FREE, L_EDOFS, L_ACT, L_SMAP, L_MI, L_MJ,                                      # ci
+(L_DSCALE, L_Q0, L_GRAV, L_DAX, L_DSEC, L_W, L_MAT, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU,     # cf
+ L_FREE, L_EDOFS, L_ACT, L_SMAP, L_MI, L_MJ, L_TEDOFS, L_TACT, L_TSMAP,              # ci
  L_INVS, L_MASSK, L_PHIST, L_DPHIST, L_SPT, L_HACC, L_GACC, L_TK, L_TG, L_D, L_FP, L_FD, L_EP, L_ED, L_BMAT,
- L_BDOT, L_GBAR, L_GDOT, L_QE, L_VE, L_RE, L_KE, L_KN, L_GPHI, L_GDPHI, L_GIDET, L_GILEN, L_LAM, L_LAMR,
- L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK,                                   # wf
+ L_BDOT, L_GBAR, L_GDOT, L_QE, L_VE, L_RE, L_KE, L_KN, L_GPHI, L_GDPHI, L_GIDET, L_GILEN, L_VEVAL,
+ L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK, L_TQE, L_TVE, L_TRE, L_TKE,          # wf
  L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_STRAIGHT,
  L_BLOCKS, L_DRIVE,                                                               # wi
- N_ITEMS) = range(65)
+ N_ITEMS) = range(74)
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
- P_CMASS, P_PIVTOL, P_MINPIV, P_NSEC, P_ACCUM, N_PAR) = range(19)
+ P_CMASS, P_PIVTOL, P_MINPIV, P_NSEC, P_ACCUM, P_DAMPED, N_PAR) = range(20)
 # Output slots of io.
-(IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, N_IO) = range(12)
+(IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, N_IO) = range(13)
 
 
-@njit(cache=True)
-def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf, ci, wf, wi, lay, tan, led, io,
-               t_n, dt, guarded):
-    """First Newton attempt of one dynamic step of a frame-only model (see the module).
+@njit(cache=True, nogil=True)
+def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf, ci, wf, wi, lay,
+               tan, led, io, t_n, dt, guarded, balance):
+    """First Newton attempt of one dynamic step of a frame/truss model (see the module).
 
     State ``q, v, a, atil (ndof,)`` is advanced in place on success and left unchanged
-    otherwise. Shared with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller),
+    otherwise. ``lam, lam_rate (na,)``: the actuator stretches λ_{n+1} and their rates (1/s,
+    read by damped elements only), set by the caller. ``balance``: the step moves no actuator,
+    so the guard's energy balance (check 3) applies. The GIL is released: a caller's other
+    threads (the node's executor) run while the step does. Shared with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller),
     ``r`` (internal force of the last evaluation), the skyline factors ``env, inv_diag,
     lu_stats`` (the held tangent) and the step guard's ledger rows ``gvec, react``. Everything
     else comes in four packs and their layout table ``lay`` (see the ``L_*`` items): every array
@@ -91,6 +95,17 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
     o = lay[L_W, 0]; w = cf[o:o + lay[L_W, 5]].reshape((lay[L_W, 1], lay[L_W, 2]))
     o = lay[L_MAT, 0]; mat = cf[o:o + lay[L_MAT, 5]].reshape((lay[L_MAT, 1], lay[L_MAT, 2]))
     o = lay[L_PAR, 0]; par = cf[o:o + lay[L_PAR, 5]]
+    o = lay[L_TL0, 0]; t_l0 = cf[o:o + lay[L_TL0, 5]]
+    o = lay[L_TEA, 0]; t_ea = cf[o:o + lay[L_TEA, 5]]
+    o = lay[L_TTAU, 0]; t_tau = cf[o:o + lay[L_TTAU, 5]]
+    o = lay[L_TEDOFS, 0]; t_edofs = ci[o:o + lay[L_TEDOFS, 5]].reshape((lay[L_TEDOFS, 1], lay[L_TEDOFS, 2]))
+    o = lay[L_TACT, 0]; t_act = ci[o:o + lay[L_TACT, 5]]
+    o = lay[L_TSMAP, 0]; t_smap = ci[o:o + lay[L_TSMAP, 5]].reshape((lay[L_TSMAP, 1], lay[L_TSMAP, 2]))
+    o = lay[L_TQE, 0]; t_qe = wf[o:o + lay[L_TQE, 5]]
+    o = lay[L_TVE, 0]; t_ve = wf[o:o + lay[L_TVE, 5]]
+    o = lay[L_TRE, 0]; t_re = wf[o:o + lay[L_TRE, 5]]
+    o = lay[L_TKE, 0]; t_ke = wf[o:o + lay[L_TKE, 5]].reshape((lay[L_TKE, 1], lay[L_TKE, 2]))
+    o = lay[L_VEVAL, 0]; v_eval = wf[o:o + lay[L_VEVAL, 5]]
     o = lay[L_FREE, 0]; free = ci[o:o + lay[L_FREE, 5]]
     o = lay[L_EDOFS, 0]; edofs = ci[o:o + lay[L_EDOFS, 5]].reshape((lay[L_EDOFS, 1], lay[L_EDOFS, 2]))
     o = lay[L_ACT, 0]; act = ci[o:o + lay[L_ACT, 5]]
@@ -125,8 +140,6 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
     o = lay[L_GDPHI, 0]; gdphi = wf[o:o + lay[L_GDPHI, 5]].reshape((lay[L_GDPHI, 1], lay[L_GDPHI, 2]))
     o = lay[L_GIDET, 0]; inv_det0 = wf[o:o + lay[L_GIDET, 5]].reshape((lay[L_GIDET, 1], lay[L_GIDET, 2]))
     o = lay[L_GILEN, 0]; inv_len0 = wf[o:o + lay[L_GILEN, 5]].reshape((lay[L_GILEN, 1], lay[L_GILEN, 2]))
-    o = lay[L_LAM, 0]; lam = wf[o:o + lay[L_LAM, 5]]
-    o = lay[L_LAMR, 0]; lam_rate = wf[o:o + lay[L_LAMR, 5]]
     o = lay[L_WBUF, 0]; w_buf = wf[o:o + lay[L_WBUF, 5]]
     o = lay[L_RF, 0]; rf = wf[o:o + lay[L_RF, 5]]
     o = lay[L_DQ, 0]; dq = wf[o:o + lay[L_DQ, 5]]
@@ -164,6 +177,7 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
     accumulate = par[P_ACCUM] != 0.0
     pivot_tol = par[P_PIVTOL]
     min_pivot_ratio = par[P_MINPIV]
+    damped = par[P_DAMPED] != 0.0
 
     # -- predictor (Python path: DynamicIntegrator._newton) -------------------------------------
     n = q.size
@@ -204,6 +218,12 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
     u_p = 0.0
     code = NO_CONVERGENCE
     it = 0
+    diss = 0.0
+    diss_p = 0.0
+    # Undamped: the rates are not read, and the stretch rates and c_v are zero as in
+    # assembly.assemble's undamped call (ws.zero_v, ws.zero_lam_rate).
+    c_vk = c_v if damped else 0.0
+    v_k = v_eval if damped else ve
     # -- Newton ------------------------------------------------------------------------------------
     for it in range(1, max_it + 1):
         for i in range(n):
@@ -211,15 +231,28 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
         if refresh:
             for i in range(kdata.size):
                 kdata[i] = 0.0
-        strain, _ = frame_group(q, ve, edofs, dax, dsec, w, nsec, mat, act, lam, lam_rate, 0.0, smap,
+        if damped:
+            velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, 0.0, v_eval)
+        # the sums in assembly.assemble's order: frame group, then bars (bit-identical)
+        strain = 0.0
+        diss = 0.0
+        u_g, dp_g = frame_group(q, v_k, edofs, dax, dsec, w, nsec, mat, act, lam, lam_rate, c_vk, smap,
                                 refresh, False, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve,
                                 re, ke, kn, straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg)
+        strain += u_g
+        diss += dp_g
+        if t_edofs.shape[0]:
+            u_g, dp_g = truss_group(q, v_k, t_edofs, t_l0, t_ea, t_tau, t_act, lam, lam_rate, c_vk, t_smap,
+                                    refresh, r, kdata, t_qe, t_ve, t_re, t_ke)
+            strain += u_g
+            diss += dp_g
         keep = it == 1 and guarded
         nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
                                     m_indptr, m_indices, m_data, r, f_ext, free, w_buf, rf, keep, g_p)
         rel = nr / ref
         if keep:
             u_p = strain
+            diss_p = diss
         if not math.isfinite(nr):
             code = NON_FINITE_RESIDUAL
             break
@@ -262,10 +295,17 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
             code = SVK_LIMIT
             io[IO_X] = smin
         else:
+            extra_p = 0.0
+            extra_size = 0.0
+            check_balance = balance and led[2] == t_n
+            if damped:          # viscous work by the trapezoidal rule (StepGuard.dynamic)
+                wv = (diss - diss_p) / (2.0 * c_v)
+                extra_p += wv
+                extra_size += abs(wv)
             g, x, y, e_end = dynamic_guard(q, dq, free, dof_scale, ivec, gvec, int(led[0]), react, int(led[1]),
                                            m_indptr, m_indices, m_data, f_ext, r, rf, a, v, drive_ids, c_m, c_v,
-                                           tol, par[P_CMASS], par[P_RISE], par[P_BAL], u_p, strain, 1.0, 0.0, 0.0,
-                                           0.0, kin, led[3], led[2] == t_n)
+                                           tol, par[P_CMASS], par[P_RISE], par[P_BAL], u_p, strain, 1.0, extra_p,
+                                           extra_size, 0.0, kin, led[3], check_balance)
             led[4] = e_end
             io[IO_X] = x
             io[IO_Y] = y
@@ -280,6 +320,7 @@ def frame_step(q, v, a, atil, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf
     io[IO_STRAIN] = strain
     io[IO_KIN] = kin
     io[IO_GRAV] = grav
+    io[IO_DISS] = diss
     if code != OK:
         if code != PIVOT:
             tan[0] = 0.0           # a failed step never leaves a stale tangent behind
@@ -360,14 +401,10 @@ class FastFrameStep:
             return f"integrator {spec.integrator}"
         if spec.on_unconverged == "accept_flagged":
             return "on_unconverged: accept_flagged (keeps the failed iterate, which the kernel does not)"
-        if len(model.frame_groups) != 1:
+        if len(model.frame_groups) > 1:
             return f"{len(model.frame_groups)} frame groups"
-        if model.truss is not None:
-            return "truss elements"
         if getattr(model, "shell_groups", ()):
             return "shell elements"
-        if model.actuators.l0.size or model.program is not None:
-            return "actuators"
         if model.drives is not None:
             return "driven supports"
         if model.n_multipliers:
@@ -375,8 +412,6 @@ class FastFrameStep:
         mo = model.moments
         if mo.follower_vdofs.shape[0] or mo.cons_vdofs.shape[0]:
             return "moment loads"
-        if model.material_damping:
-            return "material damping"
         unknown = [f.name for f in dataclasses.fields(model)
                    if f.name not in _KNOWN_MODEL_FIELDS and not _empty(getattr(model, f.name))]
         if unknown:
@@ -387,10 +422,17 @@ class FastFrameStep:
         m, ws = integ.model, integ.ws
         self.integ = integ
         self.model = m
-        g = m.frame_groups[0]
+        if m.frame_groups:
+            g, st, gst = m.frame_groups[0], ws.frame_structure[0], integ.guard._stations[0]
+            scratch = ws.frame_scratch[0]
+        else:       # bars only: an empty frame group keeps the kernel's one signature
+            g = _empty_frame_group()
+            st, gst = frame_structure(g), StepGuard._frame_stations(m, g)
+            scratch = frame_scratch(g.w.shape[1], g.dax.shape[2])
+        tg = m.truss if m.truss is not None else _empty_truss_group()
         sky = integ.lu.skyline
         guard = integ.guard
-        n, nl = m.ndof, g.edofs.shape[1]
+        n = m.ndof
         lay = np.zeros((N_ITEMS, 6), dtype=np.int64)
         par = np.zeros(N_PAR)
         spec = integ.spec
@@ -401,29 +443,30 @@ class FastFrameStep:
         par[P_SVK], par[P_RISE], par[P_BAL] = SVK_LIMIT_STRETCH, guard.rise_tolerance, guard.balance_tolerance
         par[P_CMASS], par[P_PIVTOL], par[P_MINPIV] = guard._c_mass, sky.pivot_tol, integ.lu.min_pivot_ratio
         par[P_NSEC], par[P_ACCUM] = g.nsec, sky._accumulate
+        par[P_DAMPED] = bool(m.material_damping)
         mi, mj, mv = integ._mass
         cf = _Packer(lay, np.float64)
         for item, arr in ((L_DSCALE, m.dof_scale), (L_Q0, m.q0), (L_GRAV, m.gravity_vector), (L_DAX, g.dax),
-                          (L_DSEC, g.dsec), (L_W, g.w), (L_MAT, g.mat), (L_PAR, par), (L_MV, mv)):
+                          (L_DSEC, g.dsec), (L_W, g.w), (L_MAT, g.mat), (L_PAR, par), (L_MV, mv), (L_TL0, tg.l0),
+                          (L_TEA, tg.ea), (L_TTAU, tg.tau)):
             cf.add(item, arr)
         ci = _Packer(lay, np.int64)
         for item, arr in ((L_FREE, m.free), (L_EDOFS, g.edofs), (L_ACT, g.act), (L_SMAP, g.smap), (L_MI, mi),
-                          (L_MJ, mj)):
+                          (L_MJ, mj), (L_TEDOFS, tg.edofs), (L_TACT, tg.act), (L_TSMAP, tg.smap)):
             ci.add(item, arr)
-        st = ws.frame_structure[0]
-        gst = guard._stations[0]
         wf = _Packer(lay, np.float64)
         for item, arr in ((L_INVS, integ._inv_scale), (L_MASSK, m.mass_kdata), (L_PHIST, st[1]),
                           (L_DPHIST, st[2]), (L_SPT, st[3]), (L_HACC, st[5]), (L_GACC, st[6]), (L_TK, st[7]),
                           (L_TG, st[8])):
             wf.add(item, arr)
-        for item, arr in zip(range(L_D, L_KN + 1), ws.frame_scratch[0]):
+        for item, arr in zip(range(L_D, L_KN + 1), scratch):
             wf.add(item, np.zeros_like(arr))                  # own scratch, same shapes
         for item, arr in zip((L_GPHI, L_GDPHI, L_GIDET, L_GILEN), gst):
             wf.add(item, arr)
-        for item, arr in ((L_LAM, np.ones(0)), (L_LAMR, np.zeros(0)), (L_WBUF, np.zeros(n)),
-                          (L_RF, np.zeros(m.nsys)), (L_DQ, np.zeros(m.nsys)), (L_KDATA, np.zeros(m.nnz)),
-                          (L_IVEC, np.zeros((7, n))), (L_LUWORK, np.zeros(sky.n))):
+        for item, arr in ((L_VEVAL, np.zeros(n)), (L_WBUF, np.zeros(n)), (L_RF, np.zeros(m.nsys)),
+                          (L_DQ, np.zeros(m.nsys)), (L_KDATA, np.zeros(m.nnz)), (L_IVEC, np.zeros((7, n))),
+                          (L_LUWORK, np.zeros(sky.n)), (L_TQE, np.zeros(6)), (L_TVE, np.zeros(6)),
+                          (L_TRE, np.zeros(6)), (L_TKE, np.zeros((6, 6)))):
             wf.add(item, arr)
         wi = _Packer(lay, np.int64)
         for item, arr in ((L_SLOT, sky._slot), (L_ZSLOT, sky._zero_slots),
@@ -435,6 +478,10 @@ class FastFrameStep:
         self._lay = lay
         self._packs = (cf.build(False), ci.build(False), wf.build(True), wi.build(True))
         self._io = np.zeros(N_IO)
+        na = m.actuators.l0.size
+        self._lam_n = np.zeros(na)          # λ_n and its rate at the step's start (restored on failure)
+        self._rate_n = np.zeros(na)
+        self._zero_rate = np.zeros(na)      # undamped: the elements read no stretch rate
         self._shared = (ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats)
         self._signals = m.load_signals
         self._scales = np.full(len(m.load_signals), math.nan)
@@ -479,10 +526,13 @@ class FastFrameStep:
                 ws.f_ext += gs * m.gravity_vector
         self._still = t >= self._still_after
 
-    def attempt(self, state, dt: float) -> StepResult | None:
-        """The first Newton attempt of the step ``state.t → state.t + dt``: the result (state
-        advanced when converged, unchanged otherwise), or ``None`` when the integrator's Python
-        path must make the attempt (a held SuperLU factorization, a pivot for SuperLU)."""
+    def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None
+                ) -> StepResult | None:
+        """The first Newton attempt of the step ``state.t → state.t + dt`` to the actuator
+        stretches ``lam_new`` (rates ``lam_rate`` or, for damped models, the integrator's backward
+        difference): the result (state advanced when converged, unchanged otherwise), or ``None``
+        when the integrator's Python path must make the attempt (a held SuperLU factorization, a
+        pivot for SuperLU)."""
         integ = self.integ
         lu = integ.lu
         tan = integ._tan
@@ -490,19 +540,40 @@ class FastFrameStep:
             return None                 # a held SuperLU factorization: the Python path reuses it
         guard = integ.guard
         t_n = state.t
+        lam = state.lam
+        balance = True
+        if lam.size:                    # the stretches as DynamicIntegrator._newton sets them
+            self._lam_n[:] = lam
+            self._rate_n[:] = state.lam_rate
+            if integ._damped:
+                if lam_rate is None:
+                    h0 = t_n - integ._t_prev if t_n == integ._t_hist else 0.0
+                    stretch_rate(lam_new, lam, integ._lam_hist, dt, h0, state.lam_rate)
+                else:
+                    state.lam_rate[:] = lam_rate
+            balance = not bool(np.any(lam_new != lam))
+            lam[:] = lam_new
+        rates = state.lam_rate if integ._damped else self._zero_rate
         self.loads(t_n + dt)
         f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = frame_step(state.q, state.v, state.a, state.atil, f_ext, r, env, inv_diag, stats, guard._gvec,
-                          guard._react, cf, ci, wf, wi, self._lay, tan, guard._led, self._io, t_n, dt,
-                          guard.enabled)
+        code = frame_step(state.q, state.v, state.a, state.atil, lam, rates, f_ext, r, env, inv_diag, stats,
+                          guard._gvec, guard._react, cf, ci, wf, wi, self._lay, tan, guard._led, self._io, t_n, dt,
+                          guard.enabled, balance)
         if tan[0] != 0.0:
             lu._active = lu.skyline
             lu.skyline._factored = True
         it, rel, inc, strain, kin, grav = self._io[:IO_X].tolist()
+        integ.ws.dissipation = self._io[IO_DISS]
         if code == OK:
             state.t = t_n + dt
+            if integ._damped and lam.size:      # the stretch history of the backward difference
+                integ._lam_hist[:] = self._lam_n
+                integ._t_prev, integ._t_hist = t_n, t_n + dt
             return StepResult(True, int(it), rel, inc, 1, kin, strain, grav)
+        if lam.size:                    # the step's start, for the integrator's policy
+            lam[:] = self._lam_n
+            state.lam_rate[:] = self._rate_n
         return self._failure(code, int(it), rel, inc, strain, kin, grav)
 
     def _failure(self, code: int, it: int, rel: float, inc: float, strain: float, kin: float,
@@ -539,4 +610,18 @@ class FastFrameStep:
         return StepResult(False, it, rel, inc, 1, message=message)
 
 
-from ..solvers.guard import SVK_LIMIT_STRETCH  # noqa: E402  (after the kernel: no import cycle at compile)
+def _empty_frame_group() -> FrameGroup:
+    """A frame group of no elements (linear, one point), for models of bars only."""
+    i0 = np.zeros(0, dtype=np.int64)
+    return FrameGroup(order=1, nsec=1, edofs=np.zeros((0, 18), dtype=np.int64), dax=np.zeros((0, 1, 6, 3)),
+                      dsec=np.zeros((0, 1, 6, 3)), w=np.zeros((0, 1)), mat=np.zeros((0, 7)), act=i0,
+                      smap=np.zeros((0, 324), dtype=np.int64), member=i0)
+
+
+def _empty_truss_group() -> TrussGroup:
+    i0 = np.zeros(0, dtype=np.int64)
+    return TrussGroup(edofs=np.zeros((0, 6), dtype=np.int64), l0=np.zeros(0), ea=np.zeros(0), act=i0,
+                      smap=np.zeros((0, 36), dtype=np.int64), member=i0, tau=np.zeros(0))
+
+
+from ..solvers.guard import SVK_LIMIT_STRETCH, StepGuard  # noqa: E402  (after the kernel: no import cycle at compile)
