@@ -335,8 +335,12 @@ def frame_element(qe, ve, dax, dsec, w, nsec, mat, lam, lam_rate, c_v, want_k, w
 # Block recipes of the straight element's tangent (see straight_frame_element): for row and
 # column vector types (Y, V1, V2) of a node pair, the station accumulators that enter, with the
 # factor kind (0: u_l·u_m, 1: u_l·φ_m, 2: φ_l·u_m, 3: φ_l·φ_m) and whether the 3×3 accumulator
-# enters transposed. Accumulators: 0 M0, 1 M1, 2 M2, 3 M11, 4 M12, 5 M22 (H00 times 1, s1, s2,
-# s1², s1 s2, s2²), 6–8 H01 × (1, s1, s2), 9–11 H02 × (1, s1, s2), 12 H11, 13 H12, 14 H22.
+# enters transposed. Rows 0–8, the symmetric part (material + geometric), accumulators
+# 0 M0, 1 M1, 2 M2, 3 M11, 4 M12, 5 M22 (H00 times 1, s1, s2, s1², s1 s2, s2²), 6–8 H01 × (1, s1,
+# s2), 9–11 H02 × (1, s1, s2), 12 H11, 13 H12, 14 H22. Rows 9–17, the non-symmetric viscous part
+# τ Bᵀ C B̃ of damped elements (no transposes: N_jl ≠ N_ljᵀ), accumulators 15–20 N00 × (1, s1, s2,
+# s1², s1 s2, s2²), 21–23 N01 × (1, s1, s2), 24–26 N02 × …, 27–29 N10 × …, 30–32 N20 × …, 33 N11,
+# 34 N12, 35 N21, 36 N22.
 _BLOCK = np.array([
     [[0, 0, 0], [-1, 0, 0], [-1, 0, 0], [-1, 0, 0]],          # Y,  Y
     [[1, 0, 0], [6, 1, 0], [-1, 0, 0], [-1, 0, 0]],           # Y,  V1
@@ -347,33 +351,70 @@ _BLOCK = np.array([
     [[2, 0, 0], [9, 2, 1], [-1, 0, 0], [-1, 0, 0]],           # V2, Y
     [[4, 0, 0], [8, 1, 0], [10, 2, 1], [13, 3, 1]],           # V2, V1
     [[5, 0, 0], [11, 1, 0], [11, 2, 1], [14, 3, 0]],          # V2, V2
+    [[15, 0, 0], [-1, 0, 0], [-1, 0, 0], [-1, 0, 0]],         # Y,  Y   (viscous, non-symmetric)
+    [[16, 0, 0], [21, 1, 0], [-1, 0, 0], [-1, 0, 0]],         # Y,  V1
+    [[17, 0, 0], [24, 1, 0], [-1, 0, 0], [-1, 0, 0]],         # Y,  V2
+    [[16, 0, 0], [27, 2, 0], [-1, 0, 0], [-1, 0, 0]],         # V1, Y
+    [[18, 0, 0], [22, 1, 0], [28, 2, 0], [33, 3, 0]],         # V1, V1
+    [[19, 0, 0], [25, 1, 0], [29, 2, 0], [34, 3, 0]],         # V1, V2
+    [[17, 0, 0], [30, 2, 0], [-1, 0, 0], [-1, 0, 0]],         # V2, Y
+    [[19, 0, 0], [23, 1, 0], [31, 2, 0], [35, 3, 0]],         # V2, V1
+    [[20, 0, 0], [26, 1, 0], [32, 2, 0], [36, 3, 0]],         # V2, V2
 ], dtype=np.int64)
+
+# Section monomials, in the order of the station Gram matrix and of the accumulators: 1, s1, s2,
+# s1², s1 s2, s2². _PROD[k, m] is the index of the product of the linear monomials k, m ∈ (1, s1, s2).
+_PROD = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]], dtype=np.int64)
+
+# Scratch layout of the straight kernel. gacc (N_GACC,): 0–14 the geometric (stress) accumulators,
+# then the 6×6 Gram matrix Σ w·mono_i·mono_j of the station at _GR (row-major). hacc (N_HACC, 3, 3):
+# 0–36 the tangent accumulators of _BLOCK, then per-station vectors (rows of 3×3 slots) from _SV on.
+_GR = 15
+N_GACC = _GR + 36
+_SV = 37
+_SV_F, _SV_B, _SV_H, _SV_BD, _SV_HH, _SV_BH, _SV_R, _SV_T, _SV_H3 = (_SV + k for k in range(9))
+_SV_U = _SV + 9            # 6 slots: U[mm][k] = Σ_m G[mm, k·m] c_m  (c_m the coefficients of F̃[:, 0])
+_SV_UH = _SV_U + 6         # 6 slots: the same with the coefficients of ĥ0 (viscous tangent)
+N_HACC = _SV_UH + 6
 
 
 @njit(cache=True)
-def straight_frame_element(qe, phi_st, dphi_st, s_pt, w, nsec, mat, lam, want_k, blocks, fp, ep, gbar, hacc,
-                           gacc, tk, tg, re, ke):
-    """Residual, tangent and energy of one straight, undamped frame element, from the structure
-    of its kinematics (the same integrals as :func:`frame_element`, in fewer operations).
+def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam_rate, c_v, want_k, want_dlam,
+                           blocks, gbar, gdot, hacc, gacc, tk, tg, re, ke):
+    """Residual, tangent, energy and dissipation of one straight frame element, undamped or
+    Kelvin–Voigt damped, passive or actuated, from the structure of its kinematics: the same
+    integrals as :func:`frame_element` (equal to round-off), in fewer operations.
 
     For a straight element with constant section vectors, ``A⁰ = R₀ diag(|X'|, 1, 1)``, so ``D̃``
-    has two non-zeros per row and the deformation gradient is affine in the section coordinates:
-    ``F̃(s) = [(Y' + s₁V₁' + s₂V₂')/λ, V̄₁, V̄₂]`` from five vectors per axial station
-    (``Y' = Σφ'Y/|X'|`` etc., ``V̄ = ΣφV``). Each section point then costs O(10²) flops instead of
-    O(10³); the section sums go into station accumulators (``H_jl = Σ_k C_k G_kj G_klᵀ`` times the
-    monomials 1, s₁, s₂, s₁², s₁s₂, s₂²; ``S_jl`` likewise for the geometric part), from which
-    the 3×3 node blocks of the tangent follow (``_BLOCK``). The station shear split is the
-    general kernel's. Same parameters as :func:`frame_element` except:
+    has two non-zeros per row and the deformation gradient is affine in the section coordinates,
+    ``F̃(s) = [c + s₁a + s₂b, B₁, B₂]`` with ``c, a, b = (Y', V₁', V₂')/λ`` (per |X'|) and
+    ``B = ΣφV`` at each axial station; its rate ``Ḟ`` likewise (``Ḟ[:, 0] = h_c + s₁h_a + s₂h_b``
+    including the ``−λ̇/λ`` term of a moving reference, ``Ḃ = ΣφV̇``). Strains and stresses are
+    then polynomials in ``(s₁, s₂)``: ``E₀₀, Ė₀₀, S₀₀`` of degree 2, the axial–section shears of
+    degree 1, the rest constant. Every through-section integral the element needs (energy,
+    dissipation, residual, tangent) is a polynomial of degree ≤ 4 integrated with the element's
+    own section rule, so it is evaluated *exactly as that rule would*, from the rule's moments
+    ``Σ w s₁ᵖ s₂ʳ`` (p + r ≤ 4, the 6×6 Gram matrix of the monomials 1, s₁, s₂, s₁², s₁s₂, s₂²)
+    and the polynomial coefficients: algebraically identical to the point-by-point sum, with a
+    cost independent of the number of section points. (The shipped rules are also exact for
+    degree 4, sections.py, so these are the exact section integrals.)
+
+    Tangent ``∂r/∂q + c_v ∂r/∂v``: the symmetric part ``(1 + τc_v) Bᵀ C B`` + geometric (elastic +
+    viscous stress) from the station accumulators of ``_BLOCK`` rows 0–8; for damped elements the
+    non-symmetric ``τ Bᵀ C B̃`` (``B̃ = ∂Ė/∂q`` at fixed ``v``) from rows 9–17. The station shear
+    split is the general kernel's. Same parameters as :func:`frame_element`, except:
 
     phi_st, dphi_st : (nst, n) — φ_ℓ and φ'_ℓ/|X'| (1/m) at the axial stations.
     s_pt : (nip, 2) — section coordinates (s₁, s₂) of the points (m).
-    blocks : (9, 4, 3) int64 — ``_BLOCK``.
-    fp : (nip, 3, 3), ep : (nip, 6), gbar : (2, 9n) — scratch (F̃ and E at the points, the
-        shear-split gradients).
-    hacc : (15, 3, 3), gacc : (15,) — scratch (station accumulators).
+    blocks : (18, 4, 3) int64 — ``_BLOCK``.
+    gbar, gdot : (2, 9n) — scratch (shear-split gradients, elastic and viscous).
+    hacc : (N_HACC, 3, 3), gacc : (N_GACC,) — scratch (station accumulators, Gram matrix,
+        station vectors; layout at ``_GR``, ``_SV``).
     tk : (9, 4, 3, 3), tg : (9, 4) — scratch (the accumulators combined per block kind).
 
-    Returns the strain energy (J).
+    Returns
+    -------
+    (U, dU/dλ + ∂D/∂λ̇, 2D) as :func:`frame_element` (the second only if ``want_dlam``).
     """
     nip = w.shape[0]
     nn = phi_st.shape[1]
@@ -383,222 +424,390 @@ def straight_frame_element(qe, phi_st, dphi_st, s_pt, w, nsec, mat, lam, want_k,
     g_pt = mat[2] * mat[4]
     g_t = mat[3]
     c_st = mat[2] * (mat[5] - mat[4])
+    tau = mat[6]
+    visc = tau > 0.0
     inv = 1.0 / lam
+    mdl = -lam_rate * inv * inv     # dD̃/dt = mdl · Dax, as in frame_element
+    rho = lam_rate * inv            # ∂Ḟ[:, 0]/∂q = −ρ ∂F̃[:, 0]/∂q (the moving reference)
+    kfac = 1.0 + tau * c_v
     re[:] = 0.0
     if want_k:
         ke[:, :] = 0.0
     energy = 0.0
+    dudlam = 0.0
+    diss = 0.0
+    fv = hacc[_SV_F]     # rows c, a, b: F̃[:, 0] = c + s1 a + s2 b
+    bv = hacc[_SV_B]     # rows B1, B2 (F̃[:, 1], F̃[:, 2])
+    hv = hacc[_SV_H]     # rows h_c, h_a, h_b: Ḟ[:, 0]
+    bd = hacc[_SV_BD]    # rows Ḃ1, Ḃ2
+    hh = hacc[_SV_HH]    # rows of ĥ0 = Ḟ[:, 0] − ρ F̃[:, 0] (∂Ė/∂F̃[:, 0] at fixed v)
+    bh = hacc[_SV_BH]    # rows ĥ1, ĥ2 = Ḃ − ρ B
+    rs = hacc[_SV_R]     # rows Σ w s^m P[:, 0], m = 1, s1, s2
+    ts = hacc[_SV_T]     # rows Σ w P[:, 1], Σ w P[:, 2]
+    h3 = hacc[_SV_H3]    # rows Σ w s^m Ḟ[:, 0]
     nst = nip // nsec
     for st in range(nst):
         p0 = st * nsec
-        # five station vectors: Y', V1', V2' (per |X'|) and V̄1, V̄2
-        yp0 = 0.0; yp1 = 0.0; yp2 = 0.0
-        a10 = 0.0; a11 = 0.0; a12 = 0.0
-        a20 = 0.0; a21 = 0.0; a22 = 0.0
-        b10 = 0.0; b11 = 0.0; b12 = 0.0
-        b20 = 0.0; b21 = 0.0; b22 = 0.0
-        for l in range(nn):
-            dp = dphi_st[st, l]
-            ph = phi_st[st, l]
-            k = 9 * l
-            yp0 += dp * qe[k]; yp1 += dp * qe[k + 1]; yp2 += dp * qe[k + 2]
-            a10 += dp * qe[k + 3]; a11 += dp * qe[k + 4]; a12 += dp * qe[k + 5]
-            a20 += dp * qe[k + 6]; a21 += dp * qe[k + 7]; a22 += dp * qe[k + 8]
-            b10 += ph * qe[k + 3]; b11 += ph * qe[k + 4]; b12 += ph * qe[k + 5]
-            b20 += ph * qe[k + 6]; b21 += ph * qe[k + 7]; b22 += ph * qe[k + 8]
-        wsum = 0.0
-        g01 = 0.0
-        g02 = 0.0
+        # Gram matrix of the monomials over the station's section points (weights w·λ)
+        for i in range(36):
+            gacc[_GR + i] = 0.0
         for p in range(p0, p0 + nsec):
             s1 = s_pt[p, 0]
             s2 = s_pt[p, 1]
-            f00 = (yp0 + s1 * a10 + s2 * a20) * inv
-            f10 = (yp1 + s1 * a11 + s2 * a21) * inv
-            f20 = (yp2 + s1 * a12 + s2 * a22) * inv
-            fp[p, 0, 0] = f00; fp[p, 1, 0] = f10; fp[p, 2, 0] = f20
-            fp[p, 0, 1] = b10; fp[p, 1, 1] = b11; fp[p, 2, 1] = b12
-            fp[p, 0, 2] = b20; fp[p, 1, 2] = b21; fp[p, 2, 2] = b22
-            ep[p, 0] = 0.5 * (f00 * f00 + f10 * f10 + f20 * f20 - 1.0)
-            ep[p, 1] = 0.5 * (b10 * b10 + b11 * b11 + b12 * b12 - 1.0)
-            ep[p, 2] = 0.5 * (b20 * b20 + b21 * b21 + b22 * b22 - 1.0)
-            ep[p, 3] = 0.5 * (f00 * b10 + f10 * b11 + f20 * b12)
-            ep[p, 4] = 0.5 * (f00 * b20 + f10 * b21 + f20 * b22)
-            ep[p, 5] = 0.5 * (b10 * b20 + b11 * b21 + b12 * b22)
             wl = w[p] * lam
-            wsum += wl
-            g01 += wl * 2.0 * ep[p, 3]
-            g02 += wl * 2.0 * ep[p, 4]
-        g01 /= wsum
-        g02 /= wsum
+            mo = (1.0, s1, s2, s1 * s1, s1 * s2, s2 * s2)
+            for i in range(6):
+                wi = wl * mo[i]
+                for j in range(i, 6):
+                    gacc[_GR + 6 * i + j] += wi * mo[j]
+        for i in range(6):
+            for j in range(i):
+                gacc[_GR + 6 * i + j] = gacc[_GR + 6 * j + i]
+        wsum = gacc[_GR]
+        # station vectors (and rates)
+        for i in range(3):
+            y = 0.0
+            x1 = 0.0
+            x2 = 0.0
+            z1 = 0.0
+            z2 = 0.0
+            for l in range(nn):
+                dp = dphi_st[st, l]
+                ph = phi_st[st, l]
+                k = 9 * l + i
+                y += dp * qe[k]
+                x1 += dp * qe[k + 3]
+                x2 += dp * qe[k + 6]
+                z1 += ph * qe[k + 3]
+                z2 += ph * qe[k + 6]
+            fv[0, i] = y * inv
+            fv[1, i] = x1 * inv
+            fv[2, i] = x2 * inv
+            bv[0, i] = z1
+            bv[1, i] = z2
+            if visc:
+                yd = 0.0
+                x1d = 0.0
+                x2d = 0.0
+                z1d = 0.0
+                z2d = 0.0
+                for l in range(nn):
+                    dp = dphi_st[st, l]
+                    ph = phi_st[st, l]
+                    k = 9 * l + i
+                    yd += dp * ve[k]
+                    x1d += dp * ve[k + 3]
+                    x2d += dp * ve[k + 6]
+                    z1d += ph * ve[k + 3]
+                    z2d += ph * ve[k + 6]
+                hv[0, i] = yd * inv + mdl * y
+                hv[1, i] = x1d * inv + mdl * x1
+                hv[2, i] = x2d * inv + mdl * x2
+                bd[0, i] = z1d
+                bd[1, i] = z2d
+                for k in range(3):
+                    hh[k, i] = hv[k, i] - rho * fv[k, i]
+                bh[0, i] = z1d - rho * z1
+                bh[1, i] = z2d - rho * z2
+        # strains as polynomials: E00 (coefficients of the 6 monomials), γ01, γ02 (of 1, s1, s2)
+        cc = 0.0; ca = 0.0; cb = 0.0; aa = 0.0; ab = 0.0; bb = 0.0
+        c1 = 0.0; a1 = 0.0; b1 = 0.0; c2 = 0.0; a2 = 0.0; b2 = 0.0
+        n11 = 0.0; n22 = 0.0; n12 = 0.0
+        for i in range(3):
+            fc = fv[0, i]; fa = fv[1, i]; fb = fv[2, i]; v1 = bv[0, i]; v2 = bv[1, i]
+            cc += fc * fc; ca += fc * fa; cb += fc * fb; aa += fa * fa; ab += fa * fb; bb += fb * fb
+            c1 += fc * v1; a1 += fa * v1; b1 += fb * v1
+            c2 += fc * v2; a2 += fa * v2; b2 += fb * v2
+            n11 += v1 * v1; n22 += v2 * v2; n12 += v1 * v2
+        e00 = (0.5 * (cc - 1.0), ca, cb, 0.5 * aa, ab, 0.5 * bb)
+        e11 = 0.5 * (n11 - 1.0)
+        e22 = 0.5 * (n22 - 1.0)
+        y12 = n12
+        y01 = (c1, a1, b1)
+        y02 = (c2, a2, b2)
+        r00 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        r11 = 0.0
+        r22 = 0.0
+        r12 = 0.0
+        r01 = (0.0, 0.0, 0.0)
+        r02 = (0.0, 0.0, 0.0)
+        if visc:
+            # Ė = sym(F̃ᵀ Ḟ): Ė00 = F̃0·Ḟ0 (degree 2), γ̇0α = Ḟ0·Bα + F̃0·Ḃα (degree 1), the rest constant
+            d00 = 0.0; d01 = 0.0; d02 = 0.0; d03 = 0.0; d04 = 0.0; d05 = 0.0
+            u1c = 0.0; u1a = 0.0; u1b = 0.0; u2c = 0.0; u2a = 0.0; u2b = 0.0
+            m11 = 0.0; m22 = 0.0; m12 = 0.0
+            for i in range(3):
+                fc = fv[0, i]; fa = fv[1, i]; fb = fv[2, i]; v1 = bv[0, i]; v2 = bv[1, i]
+                gc = hv[0, i]; ga = hv[1, i]; gb = hv[2, i]; w1 = bd[0, i]; w2 = bd[1, i]
+                d00 += fc * gc
+                d01 += fc * ga + fa * gc
+                d02 += fc * gb + fb * gc
+                d03 += fa * ga
+                d04 += fa * gb + fb * ga
+                d05 += fb * gb
+                u1c += gc * v1 + fc * w1; u1a += ga * v1 + fa * w1; u1b += gb * v1 + fb * w1
+                u2c += gc * v2 + fc * w2; u2a += ga * v2 + fa * w2; u2b += gb * v2 + fb * w2
+                m11 += v1 * w1; m22 += v2 * w2; m12 += v1 * w2 + w1 * v2
+            r00 = (d00, d01, d02, d03, d04, d05)
+            r11 = m11
+            r22 = m22
+            r12 = m12
+            r01 = (u1c, u1a, u1b)
+            r02 = (u2c, u2a, u2b)
+        # station shear split (averages of γ01, γ02 and their rates), and the integrals of the
+        # quadratic forms: Σ w p(s)² = pᵀ G p for a polynomial p with coefficients in the monomials
+        sg1 = 0.0; sg2 = 0.0; sh1 = 0.0; sh2 = 0.0
+        q_e = 0.0; q_r = 0.0; q_y = 0.0; q_d = 0.0
+        for i in range(3):
+            gi = gacc[_GR + i]
+            sg1 += gi * y01[i]
+            sg2 += gi * y02[i]
+            sh1 += gi * r01[i]
+            sh2 += gi * r02[i]
+            for j in range(3):
+                gij = gacc[_GR + 6 * i + j]
+                q_y += gij * (y01[i] * y01[j] + y02[i] * y02[j])
+                q_d += gij * (r01[i] * r01[j] + r02[i] * r02[j])
+        for i in range(6):
+            for j in range(6):
+                gij = gacc[_GR + 6 * i + j]
+                q_e += gij * e00[i] * e00[j]
+                q_r += gij * r00[i] * r00[j]
+        g01 = sg1 / wsum
+        g02 = sg2 / wsum
+        h01 = sh1 / wsum
+        h02 = sh2 / wsum
         energy += 0.5 * c_st * wsum * (g01 * g01 + g02 * g02)
-        tau01 = c_st * g01
-        tau02 = c_st * g02
-        r00 = 0.0; r01 = 0.0; r02 = 0.0          # Σ w P[:,0], Σ w s1 P[:,0], Σ w s2 P[:,0], Σ w P[:,1], Σ w P[:,2]
-        r10 = 0.0; r11 = 0.0; r12 = 0.0
-        r20 = 0.0; r21 = 0.0; r22 = 0.0
-        t10 = 0.0; t11 = 0.0; t12 = 0.0
-        t20 = 0.0; t21 = 0.0; t22 = 0.0
-        fw0 = 0.0; fw1 = 0.0; fw2 = 0.0           # Σ w f0, Σ w s1, Σ w s2 (shear split)
-        sw1 = 0.0
-        sw2 = 0.0
-        if want_k:
-            hacc[:, :, :] = 0.0
-            gacc[:] = 0.0
-        for p in range(p0, p0 + nsec):
-            s1 = s_pt[p, 0]
-            s2 = s_pt[p, 1]
-            wl = w[p] * lam
-            e00 = ep[p, 0]
-            e11 = ep[p, 1]
-            e22 = ep[p, 2]
-            y01 = 2.0 * ep[p, 3]
-            y02 = 2.0 * ep[p, 4]
-            y12 = 2.0 * ep[p, 5]
-            energy += wl * 0.5 * (e_ax * e00 * e00 + e_t * (e11 * e11 + e22 * e22)
-                                  + g_pt * (y01 * y01 + y02 * y02) + g_t * y12 * y12)
-            s00 = e_ax * e00
-            s11 = e_t * e11
-            s22 = e_t * e22
-            s01 = g_pt * y01 + tau01
-            s02 = g_pt * y02 + tau02
-            s12 = g_t * y12
-            f00 = fp[p, 0, 0]; f10 = fp[p, 1, 0]; f20 = fp[p, 2, 0]
-            # P = F̃ S by columns: P[:, j] = Σ_k f_k S_kj
-            q00 = f00 * s00 + b10 * s01 + b20 * s02
-            q10 = f10 * s00 + b11 * s01 + b21 * s02
-            q20 = f20 * s00 + b12 * s01 + b22 * s02
-            q01 = f00 * s01 + b10 * s11 + b20 * s12
-            q11 = f10 * s01 + b11 * s11 + b21 * s12
-            q21 = f20 * s01 + b12 * s11 + b22 * s12
-            q02 = f00 * s02 + b10 * s12 + b20 * s22
-            q12 = f10 * s02 + b11 * s12 + b21 * s22
-            q22 = f20 * s02 + b12 * s12 + b22 * s22
-            r00 += wl * q00; r01 += wl * q10; r02 += wl * q20
-            r10 += wl * s1 * q00; r11 += wl * s1 * q10; r12 += wl * s1 * q20
-            r20 += wl * s2 * q00; r21 += wl * s2 * q10; r22 += wl * s2 * q20
-            t10 += wl * q01; t11 += wl * q11; t12 += wl * q21
-            t20 += wl * q02; t21 += wl * q12; t22 += wl * q22
-            if want_k:
-                fw0 += wl * f00; fw1 += wl * f10; fw2 += wl * f20
-                sw1 += wl * s1
-                sw2 += wl * s2
-                c0 = wl * e_ax
-                c1 = wl * e_t
-                c3 = wl * g_pt
-                c5 = wl * g_t
-                mono = (1.0, s1, s2, s1 * s1, s1 * s2, s2 * s2)
-                fv = (f00, f10, f20)
-                b1 = (b10, b11, b12)
-                b2 = (b20, b21, b22)
-                for i in range(3):
-                    for j in range(3):
-                        ff = fv[i] * fv[j]
-                        g11 = b1[i] * b1[j]
-                        g22 = b2[i] * b2[j]
-                        h00 = c0 * ff + c3 * (g11 + g22)
-                        for mm in range(6):
-                            hacc[mm, i, j] += mono[mm] * h00
-                        h01 = c3 * b1[i] * fv[j]
-                        h02 = c3 * b2[i] * fv[j]
-                        hacc[6, i, j] += h01
-                        hacc[7, i, j] += s1 * h01
-                        hacc[8, i, j] += s2 * h01
-                        hacc[9, i, j] += h02
-                        hacc[10, i, j] += s1 * h02
-                        hacc[11, i, j] += s2 * h02
-                        hacc[12, i, j] += c1 * g11 + c3 * ff + c5 * g22
-                        hacc[13, i, j] += c5 * b2[i] * b1[j]
-                        hacc[14, i, j] += c1 * g22 + c3 * ff + c5 * g11
-                for mm in range(6):
-                    gacc[mm] += wl * mono[mm] * s00
-                gacc[6] += wl * s01
-                gacc[7] += wl * s1 * s01
-                gacc[8] += wl * s2 * s01
-                gacc[9] += wl * s02
-                gacc[10] += wl * s1 * s02
-                gacc[11] += wl * s2 * s02
-                gacc[12] += wl * s11
-                gacc[13] += wl * s12
-                gacc[14] += wl * s22
+        energy += 0.5 * (e_ax * q_e + g_pt * q_y + wsum * (e_t * (e11 * e11 + e22 * e22) + g_t * y12 * y12))
+        if visc:
+            diss += tau * c_st * wsum * (h01 * h01 + h02 * h02)
+            diss += tau * (e_ax * q_r + g_pt * q_d + wsum * (e_t * (r11 * r11 + r22 * r22) + g_t * r12 * r12))
+        tau01 = c_st * (g01 + tau * h01)
+        tau02 = c_st * (g02 + tau * h02)
+        # stress polynomials (elastic + viscous, local frame) and their section integrals against
+        # the monomials: gacc[0:6] = Σ w mono S00, [6:9] = Σ w s^m S01, [9:12] = … S02, [12:15] =
+        # W·(S11, S12, S22) — the geometric accumulators of _BLOCK, also what the residual needs
+        s11 = e_t * (e11 + tau * r11)
+        s22 = e_t * (e22 + tau * r22)
+        s12 = g_t * (y12 + tau * r12)
+        for i in range(6):
+            z = 0.0
+            for j in range(6):
+                z += gacc[_GR + 6 * i + j] * e_ax * (e00[j] + tau * r00[j])
+            gacc[i] = z
+        for i in range(3):
+            z1 = gacc[_GR + 6 * i] * tau01
+            z2 = gacc[_GR + 6 * i] * tau02
+            for j in range(3):
+                gij = gacc[_GR + 6 * i + j]
+                z1 += gij * g_pt * (y01[j] + tau * r01[j])
+                z2 += gij * g_pt * (y02[j] + tau * r02[j])
+            gacc[6 + i] = z1
+            gacc[9 + i] = z2
+        gacc[12] = wsum * s11
+        gacc[13] = wsum * s12
+        gacc[14] = wsum * s22
+        # P = F̃ S by columns: Σ w s^m P[:,0] = Σ_k c_k Σ w s^m s^k S00 + B1 Σ w s^m S01 + B2 Σ w s^m S02,
+        # Σ w P[:,1] = Σ_k c_k Σ w s^k S01 + W (B1 S11 + B2 S12), Σ w P[:,2] likewise
+        for i in range(3):
+            v1 = bv[0, i]
+            v2 = bv[1, i]
+            for m in range(3):
+                z = v1 * gacc[6 + m] + v2 * gacc[9 + m]
+                for k in range(3):
+                    z += fv[k, i] * gacc[_PROD[m, k]]
+                rs[m, i] = z
+            t1 = v1 * gacc[12] + v2 * gacc[13]
+            t2 = v1 * gacc[13] + v2 * gacc[14]
+            for k in range(3):
+                t1 += fv[k, i] * gacc[6 + k]
+                t2 += fv[k, i] * gacc[9 + k]
+            ts[0, i] = t1
+            ts[1, i] = t2
         # residual: Y rows take P[:,0]·φ'/|X'|λ, V rows add s·P[:,0] and P[:,1|2]·φ
         for l in range(nn):
             u = dphi_st[st, l] * inv
             ph = phi_st[st, l]
             k = 9 * l
-            re[k] += u * r00; re[k + 1] += u * r01; re[k + 2] += u * r02
-            re[k + 3] += u * r10 + ph * t10; re[k + 4] += u * r11 + ph * t11; re[k + 5] += u * r12 + ph * t12
-            re[k + 6] += u * r20 + ph * t20; re[k + 7] += u * r21 + ph * t21; re[k + 8] += u * r22 + ph * t22
-        if want_k:
-            # per vector-type pair (ta, tb) and factor kind (u_l u_m, u_l φ_m, φ_l u_m, φ_l φ_m): the
-            # 3×3 matrix that the factor multiplies, geometric part (scalar × I₃) included
-            tk[:, :, :, :] = 0.0
-            tg[:, :] = 0.0
-            for bt in range(9):
-                for z in range(4):
-                    idx = blocks[bt, z, 0]
+            for i in range(3):
+                re[k + i] += u * rs[0, i]
+                re[k + 3 + i] += u * rs[1, i] + ph * ts[0, i]
+                re[k + 6 + i] += u * rs[2, i] + ph * ts[1, i]
+        if want_dlam:
+            # dF̃/dλ = −F̃[:, 0] e₀ᵀ/λ, so ∂U/∂λ|_q (+ ∂D/∂λ̇) = −Σ w P[:, 0]·F̃[:, 0]/λ (+ U/λ, below)
+            pf = 0.0
+            for m in range(3):
+                for i in range(3):
+                    pf += fv[m, i] * rs[m, i]
+            dudlam -= pf * inv
+        if not want_k:
+            continue
+        # symmetric accumulators 0–14 (material part × (1 + τ c_v)): U[mm][k] = Σ_m G[mm, k·m] c_m
+        # gives Σ w mono_mm F̃0 F̃0ᵀ = Σ_k c_k U[mm][k]ᵀ, and Σ w s^m F̃0 = U[m][0]
+        for mm in range(6):
+            um = hacc[_SV_U + mm]
+            for k in range(3):
+                for j in range(3):
+                    z = 0.0
+                    for m in range(3):
+                        z += gacc[_GR + 6 * mm + _PROD[k, m]] * fv[m, j]
+                    um[k, j] = z
+        for mm in range(6):
+            um = hacc[_SV_U + mm]
+            gm = gacc[_GR + mm]
+            for i in range(3):
+                for j in range(3):
+                    ff = fv[0, i] * um[0, j] + fv[1, i] * um[1, j] + fv[2, i] * um[2, j]
+                    hacc[mm, i, j] = kfac * (e_ax * ff + g_pt * gm * (bv[0, i] * bv[0, j] + bv[1, i] * bv[1, j]))
+                    if mm == 0:
+                        b11 = bv[0, i] * bv[0, j]
+                        b22 = bv[1, i] * bv[1, j]
+                        hacc[12, i, j] = kfac * (wsum * (e_t * b11 + g_t * b22) + g_pt * ff)
+                        hacc[13, i, j] = kfac * wsum * g_t * bv[1, i] * bv[0, j]
+                        hacc[14, i, j] = kfac * (wsum * (e_t * b22 + g_t * b11) + g_pt * ff)
+        for m in range(3):
+            u3 = hacc[_SV_U + m]          # row 0: Σ w s^m F̃0
+            for i in range(3):
+                for j in range(3):
+                    hacc[6 + m, i, j] = kfac * g_pt * bv[0, i] * u3[0, j]
+                    hacc[9 + m, i, j] = kfac * g_pt * bv[1, i] * u3[0, j]
+        if visc:
+            # non-symmetric accumulators 15–36: N_jl = Σ_k C_k ∂ε_k/∂F̃[:, j] ⊗ ∂ε̇_k/∂F̃[:, l] (fixed v)
+            for mm in range(6):
+                um = hacc[_SV_UH + mm]
+                for k in range(3):
+                    for j in range(3):
+                        z = 0.0
+                        for m in range(3):
+                            z += gacc[_GR + 6 * mm + _PROD[k, m]] * hh[m, j]
+                        um[k, j] = z
+            for m in range(3):
+                for j in range(3):
+                    z = 0.0
+                    for k in range(3):
+                        z += gacc[_GR + 6 * m + k] * hv[k, j]
+                    h3[m, j] = z
+            for mm in range(6):
+                um = hacc[_SV_UH + mm]
+                gm = gacc[_GR + mm]
+                for i in range(3):
+                    for j in range(3):
+                        fh = fv[0, i] * um[0, j] + fv[1, i] * um[1, j] + fv[2, i] * um[2, j]
+                        hacc[15 + mm, i, j] = tau * (e_ax * fh + g_pt * gm * (bv[0, i] * bh[0, j]
+                                                                              + bv[1, i] * bh[1, j]))
+            for i in range(3):
+                for j in range(3):
+                    fh0 = fv[0, i] * h3[0, j] + fv[1, i] * h3[1, j] + fv[2, i] * h3[2, j]   # Σ w F̃0 Ḟ0ᵀ
+                    hacc[33, i, j] = tau * (wsum * (e_t * bv[0, i] * bd[0, j] + g_t * bv[1, i] * bd[1, j])
+                                            + g_pt * fh0)
+                    hacc[34, i, j] = tau * wsum * g_t * bv[1, i] * bd[0, j]
+                    hacc[35, i, j] = tau * wsum * g_t * bv[0, i] * bd[1, j]
+                    hacc[36, i, j] = tau * (wsum * (e_t * bv[1, i] * bd[1, j] + g_t * bv[0, i] * bd[0, j])
+                                            + g_pt * fh0)
+                    for m in range(3):
+                        fs = hacc[_SV_U + m, 0, i]
+                        hacc[21 + m, i, j] = tau * g_pt * bv[0, i] * h3[m, j]
+                        hacc[24 + m, i, j] = tau * g_pt * bv[1, i] * h3[m, j]
+                        hacc[27 + m, i, j] = tau * g_pt * fs * bh[0, j]
+                        hacc[30 + m, i, j] = tau * g_pt * fs * bh[1, j]
+        # per vector-type pair (ta, tb) and factor kind (u_l u_m, u_l φ_m, φ_l u_m, φ_l φ_m): the
+        # 3×3 matrix that the factor multiplies, geometric part (scalar × I₃) included
+        tk[:, :, :, :] = 0.0
+        tg[:, :] = 0.0
+        for bt in range(9):
+            for zz in range(4):
+                idx = blocks[bt, zz, 0]
+                if idx < 0:
+                    break
+                kind = blocks[bt, zz, 1]
+                tg[bt, kind] += gacc[idx]
+                if blocks[bt, zz, 2] == 0:
+                    for i in range(3):
+                        for j in range(3):
+                            tk[bt, kind, i, j] += hacc[idx, i, j]
+                else:
+                    for i in range(3):
+                        for j in range(3):
+                            tk[bt, kind, i, j] += hacc[idx, j, i]
+            if visc:
+                for zz in range(4):
+                    idx = blocks[9 + bt, zz, 0]
                     if idx < 0:
                         break
-                    kind = blocks[bt, z, 1]
-                    tg[bt, kind] += gacc[idx]
-                    if blocks[bt, z, 2] == 0:
-                        for i in range(3):
-                            for j in range(3):
-                                tk[bt, kind, i, j] += hacc[idx, i, j]
-                    else:
-                        for i in range(3):
-                            for j in range(3):
-                                tk[bt, kind, i, j] += hacc[idx, j, i]
-                for kind in range(4):
+                    kind = blocks[9 + bt, zz, 1]
                     for i in range(3):
-                        tk[bt, kind, i, i] += tg[bt, kind]
+                        for j in range(3):
+                            tk[bt, kind, i, j] += hacc[idx, i, j]
+            for kind in range(4):
+                for i in range(3):
+                    tk[bt, kind, i, i] += tg[bt, kind]
+        for l in range(nn):
+            ul = dphi_st[st, l] * inv
+            pl = phi_st[st, l]
+            # undamped: upper blocks only, mirrored at the end; damped: every block (non-symmetric)
+            for m in range(0 if visc else l, nn):
+                um_ = dphi_st[st, m] * inv
+                pm = phi_st[st, m]
+                f0 = ul * um_
+                f1 = ul * pm
+                f2 = pl * um_
+                f3 = pl * pm
+                for ta in range(3):
+                    ra = 9 * l + 3 * ta
+                    tb0 = ta if (m == l and not visc) else 0
+                    for tb in range(tb0, 3):
+                        cb = 9 * m + 3 * tb
+                        bt = 3 * ta + tb
+                        for i in range(3):
+                            for j in range(3):
+                                ke[ra + i, cb + j] += (f0 * tk[bt, 0, i, j] + f1 * tk[bt, 1, i, j]
+                                                       + f2 * tk[bt, 2, i, j] + f3 * tk[bt, 3, i, j])
+        if c_st != 0.0:
+            # station shear split: rank two, with ∂(Σ w γ01)/∂q and ∂(Σ w γ02)/∂q from the station
+            # sums (the general kernel's gbar); damped: ∂(Σ w γ̇0α)/∂q at fixed v (its gdot)
+            sw1 = gacc[_GR + 1]
+            sw2 = gacc[_GR + 2]
+            fw = hacc[_SV_U]      # row 0: Σ w F̃0
             for l in range(nn):
                 ul = dphi_st[st, l] * inv
                 pl = phi_st[st, l]
-                for m in range(l, nn):
-                    um = dphi_st[st, m] * inv
-                    pm = phi_st[st, m]
-                    f0 = ul * um
-                    f1 = ul * pm
-                    f2 = pl * um
-                    f3 = pl * pm
-                    for ta in range(3):
-                        ra = 9 * l + 3 * ta
-                        tb0 = ta if m == l else 0         # lower blocks: mirrored at the end
-                        for tb in range(tb0, 3):
-                            cb = 9 * m + 3 * tb
-                            bt = 3 * ta + tb
-                            for i in range(3):
-                                for j in range(3):
-                                    ke[ra + i, cb + j] += (f0 * tk[bt, 0, i, j] + f1 * tk[bt, 1, i, j]
-                                                           + f2 * tk[bt, 2, i, j] + f3 * tk[bt, 3, i, j])
-            if c_st != 0.0:
-                # station shear split: rank two, with ∂(Σ w γ01)/∂q and ∂(Σ w γ02)/∂q from the
-                # station sums (the general kernel's gbar)
-                for l in range(nn):
-                    ul = dphi_st[st, l] * inv
-                    pl = phi_st[st, l]
-                    k = 9 * l
-                    gbar[0, k] = ul * wsum * b10; gbar[0, k + 1] = ul * wsum * b11; gbar[0, k + 2] = ul * wsum * b12
-                    gbar[0, k + 3] = pl * fw0 + ul * sw1 * b10
-                    gbar[0, k + 4] = pl * fw1 + ul * sw1 * b11
-                    gbar[0, k + 5] = pl * fw2 + ul * sw1 * b12
-                    gbar[0, k + 6] = ul * sw2 * b10; gbar[0, k + 7] = ul * sw2 * b11; gbar[0, k + 8] = ul * sw2 * b12
-                    gbar[1, k] = ul * wsum * b20; gbar[1, k + 1] = ul * wsum * b21; gbar[1, k + 2] = ul * wsum * b22
-                    gbar[1, k + 3] = ul * sw1 * b20; gbar[1, k + 4] = ul * sw1 * b21; gbar[1, k + 5] = ul * sw1 * b22
-                    gbar[1, k + 6] = pl * fw0 + ul * sw2 * b20
-                    gbar[1, k + 7] = pl * fw1 + ul * sw2 * b21
-                    gbar[1, k + 8] = pl * fw2 + ul * sw2 * b22
-                cw = c_st / wsum
+                k = 9 * l
+                for i in range(3):
+                    gbar[0, k + i] = ul * wsum * bv[0, i]
+                    gbar[0, k + 3 + i] = pl * fw[0, i] + ul * sw1 * bv[0, i]
+                    gbar[0, k + 6 + i] = ul * sw2 * bv[0, i]
+                    gbar[1, k + i] = ul * wsum * bv[1, i]
+                    gbar[1, k + 3 + i] = ul * sw1 * bv[1, i]
+                    gbar[1, k + 6 + i] = pl * fw[0, i] + ul * sw2 * bv[1, i]
+                    if visc:
+                        gdot[0, k + i] = ul * wsum * bh[0, i]
+                        gdot[0, k + 3 + i] = pl * h3[0, i] + ul * sw1 * bh[0, i]
+                        gdot[0, k + 6 + i] = ul * sw2 * bh[0, i]
+                        gdot[1, k + i] = ul * wsum * bh[1, i]
+                        gdot[1, k + 3 + i] = ul * sw1 * bh[1, i]
+                        gdot[1, k + 6 + i] = pl * h3[0, i] + ul * sw2 * bh[1, i]
+            cw = c_st / wsum
+            if visc:
+                for r in range(nloc):
+                    g0 = cw * kfac * gbar[0, r]
+                    g1 = cw * kfac * gbar[1, r]
+                    n0 = cw * tau * gbar[0, r]
+                    n1 = cw * tau * gbar[1, r]
+                    for c in range(nloc):
+                        ke[r, c] += g0 * gbar[0, c] + g1 * gbar[1, c] + n0 * gdot[0, c] + n1 * gdot[1, c]
+            else:
                 for r in range(nloc):
                     g0 = cw * gbar[0, r]
                     g1 = cw * gbar[1, r]
                     for c in range(r, nloc):
                         ke[r, c] += g0 * gbar[0, c] + g1 * gbar[1, c]
-    if want_k:
+    if want_k and not visc:
         for r in range(nloc):
             for c in range(r + 1, nloc):
                 ke[c, r] = ke[r, c]
-    return energy
+    if want_dlam:
+        dudlam += energy * inv
+    return energy, dudlam, diss
 
 
 @njit(cache=True)
@@ -610,8 +819,9 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
     ``v (ndof,)`` rates of the unknowns (read only for damped elements); ``edofs (ne, 9n)`` global
     DOF ids; ``act (ne,)`` actuator id or −1; ``lam_act, lam_rate`` stretch and stretch rate per
     actuator; ``smap (ne, (9n)²)`` position of each local entry in ``kdata`` (−1: prescribed).
-    ``straight … gacc`` (:func:`frame_structure`): elements flagged straight (and undamped) go
-    through :func:`straight_frame_element`, the others through :func:`frame_element`.
+    ``straight … tg`` (:func:`frame_structure`): elements flagged straight (damped or not,
+    actuated or not) go through :func:`straight_frame_element`, the others (curved) through
+    :func:`frame_element`.
     ``want_dlam`` must be passed in (False) rather than written as a literal: a literal constant
     in a call between njit functions is typed ``Literal[bool]`` and compiles a second signature.
     Returns the group's strain energy (J) and dissipated power (W).
@@ -632,9 +842,8 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
             lam = lam_act[act[e]]
             lrate = lam_rate[act[e]]
         if straight[e] == 1:
-            u = straight_frame_element(qe, phi_st[e], dphi_st[e], s_pt[e], w[e], nsec, mat[e], lam, want_k,
-                                       blocks, fp, ep, gbar, hacc, gacc, tk, tg, re, ke)
-            de = 0.0
+            u, _, de = straight_frame_element(qe, ve, phi_st[e], dphi_st[e], s_pt[e], w[e], nsec, mat[e], lam, lrate,
+                                              c_v, want_k, want_dlam, blocks, gbar, gdot, hacc, gacc, tk, tg, re, ke)
         else:
             u, _, de = frame_element(qe, ve, dax[e], dsec[e], w[e], nsec, mat[e], lam, lrate, c_v, want_k,
                                      want_dlam, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, re, ke, kn)
@@ -683,12 +892,13 @@ def frame_scratch(nip: int, nv: int) -> tuple[np.ndarray, ...]:
 def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
     """Per-group data of :func:`straight_frame_element` (computed once per model, from the
     group's own integration data): ``(straight (ne,) int64, phi_st (ne, nst, n), dphi_st (ne, nst,
-    n), s_pt (ne, nip, 2), _BLOCK, hacc (15, 3, 3), gacc (15,), tk (9, 4, 3, 3), tg (9, 4))``.
+    n), s_pt (ne, nip, 2), _BLOCK (18, 4, 3), hacc (N_HACC, 3, 3), gacc (N_GACC,), tk (9, 4, 3, 3),
+    tg (9, 4))``.
 
     An element is flagged straight when its ``D̃`` has the structure of a straight element with
     constant section vectors (``d_Y = [φ'/|X'|, 0, 0]``, ``d_V1 = [s₁φ'/|X'|, φ, 0]``, ``d_V2 =
-    [s₂φ'/|X'|, 0, φ]`` at every point, to 1e-12 of its largest entry) and it is undamped;
-    curved and damped elements keep :func:`frame_element`. ``structured=False`` flags none.
+    [s₂φ'/|X'|, 0, φ]`` at every point, to 1e-12 of its largest entry), damped or not; curved
+    elements keep :func:`frame_element`. ``structured=False`` flags none.
     """
     ne, nip, nv, _ = g.dax.shape
     n = nv // 3
@@ -701,7 +911,7 @@ def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
     for e in range(ne if structured else 0):
         dax, dsec = g.dax[e], g.dsec[e]
         tol = 1e-12 * max(np.abs(dax).max(), np.abs(dsec).max())
-        ok = g.mat[e, 6] == 0.0 and np.abs(dax[:, :, 1:]).max() <= tol and np.abs(dsec[:, :, 0]).max() <= tol
+        ok = np.abs(dax[:, :, 1:]).max() <= tol and np.abs(dsec[:, :, 0]).max() <= tol
         ok = ok and np.abs(dsec[:, 0::3, :]).max() <= tol
         ok = ok and np.abs(dsec[:, 1::3, 2]).max() <= tol and np.abs(dsec[:, 2::3, 1]).max() <= tol
         for st in range(nst):
@@ -722,5 +932,5 @@ def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
             phi_st[e, st] = ph
             dphi_st[e, st] = dp
         straight[e] = 1 if ok else 0
-    return (straight, phi_st, dphi_st, s_pt, _BLOCK, np.zeros((15, 3, 3)), np.zeros(15), np.zeros((9, 4, 3, 3)),
-            np.zeros((9, 4)))
+    return (straight, phi_st, dphi_st, s_pt, _BLOCK, np.zeros((N_HACC, 3, 3)), np.zeros(N_GACC),
+            np.zeros((9, 4, 3, 3)), np.zeros((9, 4)))
