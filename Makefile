@@ -19,7 +19,7 @@ MAKEFLAGS += --no-builtin-rules
 PYTHON ?= python3.11
 VENV := $(CURDIR)/.venv
 PY := $(VENV)/bin/python
-EXTRAS := dev,ros,ros-build,record,viz,bench
+EXTRAS := dev,ros,ros-build,record,viz,bench,cluster
 MSGS_BUILD := $(CURDIR)/build/msgs
 MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.msg msgs/srv/*.srv))
 

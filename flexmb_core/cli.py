@@ -244,6 +244,53 @@ def cmd_tune(args: argparse.Namespace) -> int:
     return 0 if best.ok else 3
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .study.progress import ProgressBar
+    from .study.sweep import sweep
+
+    params = [x for group in (args.param or []) for x in group]
+    outputs = [x for x in (args.outputs or "").split(",") if x] or None
+    res = sweep(args.scene, params, samples=args.samples, distribution=args.distribution, seed=args.seed,
+                until=args.until, outputs=outputs, every=args.every, out=args.out, scheduler=args.scheduler,
+                workers=args.workers, retries=args.retries,
+                progress=None if args.quiet else ProgressBar(sys.stderr))
+    if not args.quiet:
+        print(f"{len(res.specs)} runs: {res.computed} computed, {res.cached} stored already, {res.failed} failed "
+              f"({res.wall_time_s:.2f} s on {res.workers or 0} workers); table {res.files.get('csv')}")
+        for row in [r for r in res.rows if r is not None and not r.get("ok")][:5]:
+            print(f"  failed {row['params']}: {row['error']}")
+    if res.interrupted:
+        print("flexmb sweep: interrupted; the finished runs are stored, run the command again to resume",
+              file=sys.stderr)
+        return 130
+    return 3 if res.failed else 0
+
+
+def _sweep_help() -> str:
+    return """A parameter study of a scene; every run is a task on Dask distributed (extra [cluster]).
+
+--param KEY=VALUES (repeatable): KEY is a scene key path, as `flexmb replay --override`
+(materials.steel.E, point_masses.payload_a.mass, solver.dt, supports.0.type). VALUES is a list
+a,b,c (the list parameters are crossed: full factorial, the first --param varying slowest) or a
+range LO:HI, sampled with --samples N points of a seeded Latin hypercube over all range parameters
+(--distribution uniform | loguniform | normal: mean (LO+HI)/2, sigma (HI-LO)/4, truncated to
+[LO, HI]); integer bounds (2:8) give integers. List and range parameters together: each list
+combination gets the same N samples.
+
+Each run loads the scene with its values, compiles, warms up (numba cache shared on disk through
+NUMBA_CACHE_DIR), runs to --until and returns one row: the parameters, the `flexmb run --json`
+metrics, the max/min/RMS over time and final value of every chosen output part, the wall time and
+the convergence flags. A failed run is a row with its error. Rows are stored as OUT/runs/<sha256
+of the effective scene, until, outputs>.json as they finish: running the command again computes
+only what is missing (a killed sweep resumes). A worker that dies mid-run loses nothing: the
+scheduler runs the task again elsewhere.
+
+Writes OUT/sweep.csv, sweep.parquet (with pyarrow), sweep.png (with matplotlib), sweep.json and
+scenes/<key>.yaml (each run's scene: `flexmb run` reproduces its row).
+Exit codes: 0 every run completed, 3 some runs failed (their rows say why), 1 bad input, 130 interrupted.
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flexmb", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -297,9 +344,32 @@ def build_parser() -> argparse.ArgumentParser:
                     help="outputs held to --tol (default: the kinematic ones; forces and energy are reported)")
     tn.add_argument("--quiet", action="store_true")
     tn.set_defaults(func=cmd_tune)
+
+    sw = sub.add_parser("sweep", help="parameter study over scene keys, each run a task on Dask distributed "
+                                      "(extra [cluster]); a table, plots, resumable",
+                        description=_sweep_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    sw.add_argument("scene")
+    sw.add_argument("--param", metavar="KEY=VALUES", nargs="+", action="append", required=True,
+                    help="scene key path (as replay --override) and a list a,b,c or a range LO:HI")
+    sw.add_argument("--samples", type=int, help="Latin hypercube samples over the range parameters")
+    sw.add_argument("--distribution", choices=("uniform", "loguniform", "normal"), default="uniform",
+                    help="of the range parameters (normal: mean (LO+HI)/2, σ = (HI-LO)/4, truncated)")
+    sw.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube")
+    sw.add_argument("--until", type=float, help="end time of every run (s); default: the scene's solver.until")
+    sw.add_argument("--outputs", metavar="A,B,..",
+                    help="outputs (or parts: platform.position) whose max/min/RMS go in the table; "
+                         "default: every declared output but whole shapes")
+    sw.add_argument("--every", type=int, default=1, help="sample the outputs every K steps")
+    sw.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (tcp://host:8786); "
+                                                            "default: a local cluster")
+    sw.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
+    sw.add_argument("--retries", type=int, default=2, help="re-runs of a task that raised on a worker")
+    sw.add_argument("--out", default="build/sweep", help="directory: runs/, scenes/, sweep.csv/.parquet/.png/.json")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
+    sw.set_defaults(func=cmd_sweep)
     # Where the application layer (ros2_node.cli) adds its verbs and its options to `run`.
     p.verbs = sub
-    p.verb_parsers = {"check": c, "run": r, "commands": cm, "bench": bn, "tune": tn}
+    p.verb_parsers = {"check": c, "run": r, "commands": cm, "bench": bn, "tune": tn, "sweep": sw}
     return p
 
 

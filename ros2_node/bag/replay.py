@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from flexmb_core.errors import FlexmbError
+from flexmb_core.scene.overrides import apply_overrides
 
 from .. import topics as T
 from .compare import Comparison, FieldStat
@@ -43,67 +44,6 @@ _OUTPUT_TYPES = {"sensor_msgs/msg/JointState", "flexmb_msgs/msg/ActuatorState", 
 
 class ReplayError(FlexmbError):
     """A bag that cannot be replayed as asked (bad input: exit code 1)."""
-
-
-def _parse_override(item: str) -> tuple[list[str], Any]:
-    from flexmb_core.scene.loader import parse_yaml
-
-    if "=" not in item:
-        raise ReplayError(f"--override {item!r}: expected KEY.PATH=VALUE, e.g. materials.steel.E=2.2e11")
-    key, raw = item.split("=", 1)
-    path = [p for p in key.strip().split(".") if p]
-    if not path:
-        raise ReplayError(f"--override {item!r}: empty key")
-    return path, parse_yaml(raw)
-
-
-def apply_overrides(data: dict, items: list[str] | None) -> dict:
-    """Set dotted keys of a scene mapping (``materials.steel.E=2.2e11``; list items by index).
-    Keys under ``solver.`` are returned separately (they win over the recorded solver settings).
-
-    Raises
-    ------
-    ReplayError
-        When a key's parent does not exist or an index is out of range.
-    """
-    solver: dict = {}
-    for item in items or ():
-        path, value = _parse_override(item)
-        if path[0] == "solver" and len(path) == 2:
-            solver[path[1]] = value
-            continue
-        node: Any = data
-        for depth, key in enumerate(path[:-1]):
-            node = _child(node, key, ".".join(path[:depth + 1]), item)
-        last = path[-1]
-        if isinstance(node, list):
-            node[_index(node, last, item)] = value
-        elif isinstance(node, dict):
-            node[last] = value
-        else:
-            raise ReplayError(f"--override {item!r}: {'.'.join(path[:-1])} is a value, not a mapping")
-    return solver
-
-
-def _index(node: list, key: str, item: str) -> int:
-    try:
-        i = int(key)
-    except ValueError:
-        raise ReplayError(f"--override {item!r}: {key!r} must be a list index") from None
-    if not -len(node) <= i < len(node):
-        raise ReplayError(f"--override {item!r}: index {i} out of range (list of {len(node)})")
-    return i
-
-
-def _child(node: Any, key: str, where: str, item: str) -> Any:
-    if isinstance(node, dict):
-        if key not in node:
-            raise ReplayError(f"--override {item!r}: the scene has no key {where!r} "
-                              f"(has {sorted(map(str, node))})")
-        return node[key]
-    if isinstance(node, list):
-        return node[_index(node, key, item)]
-    raise ReplayError(f"--override {item!r}: {where!r} is a value, not a mapping")
 
 
 @dataclass
