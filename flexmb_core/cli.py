@@ -1,7 +1,10 @@
 """flexmb — flexible digital twin of actuated spatial mechanisms (positional FEM).
 
 Verbs:
-  flexmb check SCENE                      validate a scene and print the model summary
+  flexmb check SCENE [--max-elements N] [--max-dofs N]
+                                          validate a scene and print the model summary; size
+                                          limits (also --max-yaml-nodes, --max-file-bytes) are
+                                          checked before any per-element work
   flexmb run SCENE --until T [--dt DT] [--json OUT]
                                           offline simulation; JSON summary of speed, solver
                                           health and the final values of the scene's outputs
@@ -35,16 +38,74 @@ def _env_defaults() -> None:
     os.environ.setdefault("NUMBA_CACHE_DIR", str(Path.home() / ".cache" / "flexmb" / "numba"))
 
 
-def _load(path: str, overrides: dict | None = None):
+# Errors of loading or compiling a scene that are not FlexmbError: reported in one line, not as a
+# traceback (FLEXMB_DEBUG=1 shows it). Caught around scene loading only, never around the time loop.
+_STRAY = (ValueError, TypeError, KeyError, IndexError, ArithmeticError, RecursionError, MemoryError,
+          UnicodeError)
+MESSAGE_CHARS = 1500          # an error message printed by main is at most this long
+
+
+def _load(path: str, overrides: dict | None = None, limits=None):
+    """Load and compile a scene; every failure is a :class:`SceneError` naming the file."""
     from .model.compile import compile_scene
     from .scene import load_scene
 
-    scene = load_scene(path, overrides)
-    return scene, compile_scene(scene)
+    try:
+        scene = load_scene(path, overrides, limits=limits)
+        return scene, compile_scene(scene, limits)
+    except FlexmbError:
+        raise
+    except _STRAY as exc:
+        if os.environ.get("FLEXMB_DEBUG"):
+            raise
+        raise SceneError(str(path), _stray_message(exc)) from None
+
+
+def _stray_message(exc: BaseException) -> str:
+    from .errors import excerpt
+
+    if isinstance(exc, MemoryError):
+        return "out of memory while loading the scene; lower its size (elements, tables) or its limits"
+    text = excerpt(str(exc), 300)[1:-1] if str(exc) else ""
+    return (f"the scene could not be compiled: {type(exc).__name__}: {text} (flexmb did not expect this "
+            "input; FLEXMB_DEBUG=1 shows the traceback — please report it)")
+
+
+def _limits(args: argparse.Namespace):
+    from .scene.limits import Limits
+
+    given = {f: getattr(args, f) for f in ("max_elements", "max_dofs", "max_yaml_nodes", "max_file_bytes")
+             if getattr(args, f, None) is not None}
+    return Limits(**given) if given else None
+
+
+def add_limit_flags(p: argparse.ArgumentParser) -> None:
+    """``--max-elements`` etc.: the size limits of :class:`~flexmb_core.scene.limits.Limits`."""
+    from .scene.limits import DEFAULT_LIMITS as d
+
+    g = p.add_argument_group("scene size limits", "checked before any per-element work; raise them for big scenes")
+    g.add_argument("--max-elements", type=_positive_int, metavar="N",
+                   help=f"most frame, bar and shell elements in all (default {d.max_elements})")
+    g.add_argument("--max-dofs", type=_positive_int, metavar="N",
+                   help=f"most DOFs before joints merge shared ones (default {d.max_dofs})")
+    g.add_argument("--max-yaml-nodes", type=_positive_int, metavar="N",
+                   help=f"most YAML values after alias expansion (default {d.max_yaml_nodes})")
+    g.add_argument("--max-file-bytes", type=_positive_int, metavar="N",
+                   help=f"largest scene file (default {d.max_file_bytes})")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text[:40]!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    _, model = _load(args.scene)
+    _, model = _load(args.scene, limits=_limits(args))
     summary = model.summary()
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -89,7 +150,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .tracking import PoseTracker
 
     overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
-    scene, model = _load(args.scene, overrides)
+    scene, model = _load(args.scene, overrides, _limits(args))
     sim = Simulator(model)
     warm = sim.warmup()
     sim.initialize()
@@ -199,15 +260,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_tune(args: argparse.Namespace) -> int:
     import yaml
 
-    from .scene.loader import parse_yaml
+    from .scene.loader import parse_yaml, read_scene_text
     from .tune import report_markdown, tune
 
     path = Path(args.scene)
-    try:
-        data = parse_yaml(path.read_text())
-    except OSError as exc:
-        raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
     _load(args.scene)                                   # validate first: errors name file:key
+    data = parse_yaml(read_scene_text(path), str(path))
     if not args.tol > 0:
         print(f"flexmb tune: --tol must be a positive number, got {args.tol}", file=sys.stderr)
         return 1
@@ -299,6 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="validate a scene and print the model summary")
     c.add_argument("scene")
     c.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_limit_flags(c)
     c.set_defaults(func=cmd_check)
 
     r = sub.add_parser("run", help="offline simulation with a JSON summary")
@@ -308,6 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--integrator", choices=("newmark", "generalized_alpha", "chung_hulbert"))
     r.add_argument("--json", metavar="OUT", help="write the run summary (JSON) here")
     r.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
+    add_limit_flags(r)
     r.set_defaults(func=cmd_run, hook_factories=[])
 
     cm = sub.add_parser("commands", help="generate actuator command tables")
@@ -393,11 +453,16 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     try:
         return args.func(args)
     except SceneError as exc:
-        print(f"flexmb {args.verb}: scene error: {exc}", file=sys.stderr)
+        print(_bounded(f"flexmb {args.verb}: scene error: {exc}"), file=sys.stderr)
         return 1
     except FlexmbError as exc:
-        print(f"flexmb {args.verb}: {exc}", file=sys.stderr)
+        print(_bounded(f"flexmb {args.verb}: {exc}"), file=sys.stderr)
         return 1
+
+
+def _bounded(message: str) -> str:
+    """A printed error stays short whatever produced it (messages excerpt values; this is the backstop)."""
+    return message if len(message) <= MESSAGE_CHARS else message[:MESSAGE_CHARS - 30] + f"… ({len(message)} chars)"
 
 
 if __name__ == "__main__":

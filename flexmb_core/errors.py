@@ -29,3 +29,81 @@ class ConvergenceError(FlexmbError):
     def __init__(self, message: str, result=None):
         self.result = result
         super().__init__(message)
+
+
+# -- bounded excerpts for messages --------------------------------------------------------------
+# Every message that shows a user's value goes through :func:`excerpt`, every list of names through
+# :func:`name_list`: a scene can hold a million-entry list or an alias bomb, and a message must stay
+# a line long and cheap to build (never a full ``repr``).
+
+EXCERPT_CHARS = 80
+NAME_LIST_ITEMS = 8
+
+
+def thousands(n: int) -> str:
+    """``199990`` → ``'199 990'`` (a space as the thousands separator, SI style)."""
+    return f"{n:,}".replace(",", " ")
+
+
+def excerpt(value, limit: int = EXCERPT_CHARS) -> str:
+    """At most ``limit`` characters showing ``value``. A container shown in part carries its type and
+    size (``list of 200 001 items [1, 1, …]``); one shown whole reads as Python (``[1.0, 0.0]``).
+    The work is bounded by ``limit`` whatever the value's size (shared or recursive structures too)."""
+    if isinstance(value, (list, tuple, dict, set, frozenset)):
+        whole = _short(value, limit, 0)
+        if "…" not in whole:
+            return whole
+        n = len(value)
+        head = f"{_kind(value)} of {thousands(n)} {'key' if isinstance(value, dict) else 'item'}{'s' if n != 1 else ''} "
+        return _cut(head + _short(value, max(limit - len(head), 8), 0), limit)
+    return _short(value, limit, 0)
+
+
+def _kind(value) -> str:
+    return {list: "list", tuple: "list", dict: "mapping", set: "set", frozenset: "set"}.get(type(value),
+                                                                                            type(value).__name__)
+
+
+def _cut(text: str, limit: int) -> str:
+    return text if len(text) <= limit else text[:max(limit - 1, 0)] + "…"
+
+
+def _short(v, budget: int, depth: int) -> str:
+    if v is None or isinstance(v, bool):
+        return repr(v)
+    if isinstance(v, int):
+        return _cut(repr(v), budget) if v.bit_length() <= 256 else f"<int of {thousands(v.bit_length())} bits>"
+    if isinstance(v, float):
+        return _cut(repr(v), budget)
+    if isinstance(v, str):
+        return _cut(repr(v), budget) if len(v) <= budget else repr(v[:budget])[:max(budget - 1, 1)] + "…"
+    if isinstance(v, (bytes, bytearray)):
+        return _cut(repr(bytes(v[:budget])), budget)
+    if isinstance(v, (list, tuple, dict, set, frozenset)):
+        opening, closing = ("{", "}") if isinstance(v, (dict, set, frozenset)) else ("[", "]")
+        if depth >= 3 or budget < 6:
+            return f"{opening}…{closing}" if len(v) else opening + closing
+        parts, used = [], 2
+        items = v.items() if isinstance(v, dict) else v
+        for item in items:
+            room = budget - used - 5                       # keep room for ", …]"
+            if room < 3:
+                parts.append("…")
+                break
+            if isinstance(v, dict):
+                k = _short(item[0], max(room // 2, 3), depth + 1)
+                s = f"{k}: {_short(item[1], max(room - len(k) - 2, 3), depth + 1)}"
+            else:
+                s = _short(item, room, depth + 1)
+            parts.append(s)
+            used += len(s) + 2
+        return _cut(opening + ", ".join(parts) + closing, budget)
+    return f"<{type(v).__name__}>"
+
+
+def name_list(names, limit: int = NAME_LIST_ITEMS) -> str:
+    """``['a', 'b', … and 199 990 more]``: at most ``limit`` names (each excerpted), then the count."""
+    names = names if isinstance(names, (list, tuple)) else list(names)
+    shown = ", ".join(excerpt(n, 40) for n in names[:limit])
+    rest = len(names) - limit
+    return f"[{shown}, … and {thousands(rest)} more]" if rest > 0 else f"[{shown}]"

@@ -10,7 +10,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import sections as secmod
-from ..errors import SceneError
+from ..errors import SceneError, excerpt, name_list, thousands
+from ..scene.limits import Limits, check_size
 from ..scene.schema import Member, Scene, Signal
 from .frame_geometry import frame_element_geometry, frame_element_mass
 from .model import Actuators, Drives, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
@@ -29,7 +30,8 @@ def _unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def member_geometry(mem: Member, nodes: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def member_geometry(mem: Member, nodes: dict, source: str = "<scene>"
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Reference node positions, tangents and section vectors along a member.
 
     Returns ``x (m, 3)``, ``t (m, 3)``, ``v1 (m, 3)``, ``v2 (m, 3)`` with m = elements·order + 1.
@@ -49,7 +51,7 @@ def member_geometry(mem: Member, nodes: dict) -> tuple[np.ndarray, np.ndarray, n
         radius = np.linalg.norm(ra)
         normal = np.cross(ra, rb)
         if np.linalg.norm(normal) < 1e-12 * radius**2:
-            raise SceneError(f"{mem.name}", "arc from/to are collinear with the centre (180° or 0° arc): ambiguous plane")
+            raise SceneError(f"{source}:members.{mem.name}.arc", "arc from/to are collinear with the centre (180° or 0° arc): ambiguous plane")
         normal = _unit(normal)
         angle = math.atan2(np.linalg.norm(np.cross(ra, rb)), ra @ rb)
         e1 = ra / radius
@@ -64,7 +66,7 @@ def member_geometry(mem: Member, nodes: dict) -> tuple[np.ndarray, np.ndarray, n
             np.array([0.0, 0.0, 1.0]) if abs(t[k, 2]) < math.cos(math.radians(8)) else np.array([1.0, 0.0, 0.0]))
         u = up - (up @ t[k]) * t[k]
         if np.linalg.norm(u) < 1e-9 * np.linalg.norm(up):
-            raise SceneError(f"{mem.name}.up", f"'up' {list(up)} is parallel to the member axis")
+            raise SceneError(f"{source}:members.{mem.name}.up", f"'up' {excerpt(up.tolist())} is parallel to the member axis")
         v2[k] = _unit(u)
         v1[k] = np.cross(v2[k], t[k])
     return x, t, v1, v2
@@ -75,8 +77,10 @@ def member_length(x: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1)))
 
 
-def compile_scene(scene: Scene) -> Model:
-    """Build the read-only :class:`Model` of a validated scene."""
+def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
+    """Build the read-only :class:`Model` of a validated scene; a :class:`SceneError` first if the
+    scene exceeds ``limits`` (elements, DOFs: :func:`~flexmb_core.scene.limits.check_size`)."""
+    check_size(scene, limits)
     mats = scene.materials
     secs: dict[str, secmod.SectionProperties] = {}
     for name, spec in scene.sections.items():
@@ -109,7 +113,7 @@ def compile_scene(scene: Scene) -> Model:
     member_infos: list[MemberInfo] = []
     member_geom = {}
     for mem in scene.members.values():
-        x, t, v1, v2 = member_geometry(mem, scene.nodes)
+        x, t, v1, v2 = member_geometry(mem, scene.nodes, scene.source)
         member_geom[mem.name] = (x, t, v1, v2)
         m = x.shape[0]
         ids = np.empty(m, dtype=np.int64)
@@ -129,6 +133,9 @@ def compile_scene(scene: Scene) -> Model:
                 ids[k] = via_at[k]
                 continue
             name = f"{mem.name}/{k}"
+            if name in node_lookup:
+                raise SceneError(f"{scene.source}:nodes.{name}", f"the name '{name}' is taken by interior node {k} "
+                                 f"of member '{mem.name}'; rename the scene node (names 'member/k' are generated)")
             node_lookup[name] = len(node_names)
             node_names.append(name)
             node_x.append(x[k])
@@ -165,7 +172,8 @@ def compile_scene(scene: Scene) -> Model:
         compact_drafts(drafts, compact)
     unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
     if unused:
-        raise SceneError(f"{scene.source}:nodes", f"node(s) {unused} are not used by any member or shell")
+        raise SceneError(f"{scene.source}:nodes", f"node(s) {name_list(unused)} are not used by any member or shell "
+                                                  f"({thousands(len(unused))} in all)")
 
     q0_arr = np.asarray(q0, dtype=float)
     nodes_xyz = np.asarray(node_x)
@@ -262,10 +270,11 @@ def compile_scene(scene: Scene) -> Model:
                 iscale = np.tile(iscale, mem.order + 1)
             for e in range(mem.elements):
                 k = slice(e * mem.order, e * mem.order + mem.order + 1)
-                dax, dsec, w, _ = frame_element_geometry(x[k], v1[k], v2[k], mem.order, n_axial, sec.points)
+                where = f"{scene.source}:members.{mem.name}"
+                dax, dsec, w, _ = _element_geometry(where, e, x[k], v1[k], v2[k], mem.order, n_axial, sec.points)
                 # The mass needs an exact rule whatever the stiffness rule: φℓφm has degree 2p.
-                _, _, w_m, psi = frame_element_geometry(x[k], v1[k], v2[k], mem.order, mem.order + 1,
-                                                        sec.points)
+                _, _, w_m, psi = _element_geometry(where, e, x[k], v1[k], v2[k], mem.order, mem.order + 1,
+                                                   sec.points)
                 edofs = np.concatenate([np.concatenate((info.ydofs[j], info.vdofs[j]))
                                         for j in range(k.start, k.stop)])
                 b = frame_build[key]
@@ -470,6 +479,14 @@ def compile_scene(scene: Scene) -> Model:
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
                  scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
                  *hinge_arrays, node_lookup, member_lookup, shell_groups, shells, *tie_arrays)
+
+
+def _element_geometry(where: str, e: int, *args):
+    """:func:`frame_element_geometry` with its ValueError (a degenerate element) as a SceneError."""
+    try:
+        return frame_element_geometry(*args)
+    except ValueError as exc:
+        raise SceneError(where, f"element {e}: {exc}") from None
 
 
 def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:

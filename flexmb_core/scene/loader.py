@@ -8,11 +8,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import re
-
-import yaml
-
-from ..errors import SceneError
+from ..errors import SceneError, excerpt, name_list
+from . import strict_yaml
+from .limits import DEFAULT_LIMITS, Limits, over_limit
 from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
@@ -35,36 +33,32 @@ OUTPUT_KINDS = {
 }
 
 
-class _SceneYamlLoader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e9`` / ``200.0e9`` as floats (YAML 1.2), not strings."""
+def parse_yaml(text: str, source: str = "<string>", limits: Limits | None = None) -> Any:
+    """Parse scene YAML text the way :func:`load_scene` does: ``1e9`` is a float, duplicate keys,
+    deep nesting and alias bombs are :class:`SceneError` at ``source:line:column``."""
+    return strict_yaml.parse(text, source, limits)
 
 
-_SceneYamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
-                |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-                |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
-                |[-+]?\.(?:inf|Inf|INF)
-                |\.(?:nan|NaN|NAN))$""", re.X),
-    list("-+0123456789."))
-
-
-def parse_yaml(text: str) -> Any:
-    """Parse scene YAML text the way :func:`load_scene` does (``1e9`` is a float)."""
-    return yaml.load(text, Loader=_SceneYamlLoader)
-
-
-def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
-    """Read and validate a scene file. ``overrides`` are merged into ``solver`` (CLI flags)."""
+def read_scene_text(path: str | Path, limits: Limits | None = None) -> str:
+    """The UTF-8 text of a scene file (size-limited); errors name the file (and line:column)."""
     path = Path(path)
+    limits = limits or DEFAULT_LIMITS
     try:
-        text = path.read_text()
+        size = path.stat().st_size
+        if size > limits.max_file_bytes:
+            raise over_limit(str(path), "scene file size in bytes", size, "max_file_bytes", limits)
+        data = path.read_bytes()
     except OSError as exc:
         raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
-    try:
-        data = parse_yaml(text)
-    except yaml.YAMLError as exc:
-        raise SceneError(str(path), f"not valid YAML: {exc}") from None
+    return strict_yaml.decode(data, str(path))
+
+
+def load_scene(path: str | Path, overrides: dict[str, Any] | None = None, *,
+               limits: Limits | None = None) -> Scene:
+    """Read and validate a scene file. ``overrides`` are merged into ``solver`` (CLI flags);
+    ``limits`` bound the file, its alias expansion and (in :func:`compile_scene`) its size."""
+    text = read_scene_text(path, limits)
+    data = parse_yaml(text, str(path), limits)
     return scene_from_dict(data, source=str(path), overrides=overrides)
 
 
@@ -91,7 +85,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
         raise root.fail("a scene needs at least one member or one shell", "members")
     clash = sorted(set(members) & set(shells))
     if clash:
-        raise root.fail(f"name(s) {clash} are used by both a member and a shell; names must be unique", "shells")
+        raise root.fail(f"name(s) {name_list(clash)} are used by both a member and a shell; names must be unique", "shells")
 
     supports = tuple(_support(n, nodes, members, shells) for n in root.get("supports", []).list())
     forces, moments, gravity = _loads(root.get("loads", {}), nodes, members)
@@ -125,7 +119,7 @@ def _joint(n: Node, nodes, members) -> Joint:
     node = n.get("node").name_in(nodes, "node")
     mems = tuple(m.name_in(members, "member") for m in n.get("members").list())
     if len(mems) < 2 or len(set(mems)) != len(mems):
-        raise n.fail(f"a joint connects at least two distinct members, got {list(mems)}", "members")
+        raise n.fail(f"a joint connects at least two distinct members, got {name_list(mems)}", "members")
     for m in mems:
         mem = members[m]
         if node not in (mem.start, mem.end) and node not in mem.via:
@@ -151,13 +145,13 @@ def _commands(n: Node, members) -> CommandProgramSpec:
             raise a.fail(f"member '{name}' is not an actuator (kind '{members[name].kind}')")
         acts.append(name)
     if len(set(acts)) != len(acts):
-        raise n.fail(f"actuators listed twice: {acts}", "actuators")
+        raise n.fail(f"actuators listed twice: {name_list(acts)}", "actuators")
     start = n.get("start", "blended").string(("exact", "blended"))
     blend_time = n.get("blend_time", 1.0).number(positive=True, unit="s")
     switch_blend = n.get("switch_blend", 0.0).number(nonneg=True, unit="s")
     if switch_blend > 10.0:
         raise n.fail(f"the branch switch at t = 10 s is blended over [10 − T/2, 10 + T/2]; T must lie in "
-                     f"[0, 10] s (0: the exact law), got {switch_blend!r}", "switch_blend")
+                     f"[0, 10] s (0: the exact law), got {excerpt(switch_blend)}", "switch_blend")
     continuity = n.get("blend_continuity", 2).integer(lo=2, hi=4)
     return CommandProgramSpec(program, tuple(acts), start, blend_time, switch_blend, continuity)
 
@@ -173,7 +167,7 @@ def _material(name: str, n: Node) -> Material:
     if n.has("eta"):
         v = n.get("eta").value
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise n.fail(f"expected the Kelvin–Voigt viscosity as a finite number ≥ 0 in Pa·s, got {v!r} "
+            raise n.fail(f"expected the Kelvin–Voigt viscosity as a finite number ≥ 0 in Pa·s, got {excerpt(v)} "
                          f"(η = 2ζE/ω gives the damping ratio ζ at the circular frequency ω; 0: undamped)", "eta")
         eta = float(v)
     return Material(name, E, nu, rho, G, eta)
@@ -187,7 +181,7 @@ def _section(name: str, n: Node) -> SectionSpec:
                "tube": {"outer_radius", "inner_radius", "thickness"}}[shape]
     extra = sorted(k for k in n.value if k not in allowed | {"shape", "torsion_constant", "shear_factor"})
     if extra:
-        raise n.fail(f"key(s) {extra} do not apply to a {shape}; expected {sorted(allowed)}")
+        raise n.fail(f"key(s) {name_list(extra)} do not apply to a {shape}; expected {sorted(allowed)}")
     if shape == "rectangle":
         dims = (n.get("width").number(positive=True, unit="m"), n.get("height").number(positive=True, unit="m"))
     elif shape == "circle":
@@ -218,7 +212,7 @@ def signal(n: Node, *, default_value: float = 1.0) -> Signal:
             "sine": {"offset", "amplitude", "frequency", "phase"}, "table": {"t", "values"}}[kind]
     extra = sorted(k for k in n.value if k not in keys | {"kind"})
     if extra:
-        raise n.fail(f"key(s) {extra} do not apply to a '{kind}' signal; expected {sorted(keys)}")
+        raise n.fail(f"key(s) {name_list(extra)} do not apply to a '{kind}' signal; expected {sorted(keys)}")
     if kind == "constant":
         return Signal("constant", value=n.get("value", default_value).number())
     if kind == "ramp":
@@ -238,7 +232,7 @@ def signal(n: Node, *, default_value: float = 1.0) -> Signal:
     if len(t) != len(v):
         raise n.fail(f"'t' has {len(t)} entries but 'values' has {len(v)}")
     if any(b <= a for a, b in zip(t, t[1:])):
-        raise n.fail(f"'t' must be strictly increasing, got {list(t)}", "t")
+        raise n.fail(f"'t' must be strictly increasing, got {excerpt(list(t))}", "t")
     return Signal("table", table_t=t, table_v=v)
 
 
@@ -288,7 +282,7 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
     if n.has("via"):
         via = tuple(v.name_in(nodes, "node") for v in n.get("via").list())
         if start in via or end in via or len(set(via)) != len(via):
-            raise n.fail(f"'via' must list distinct interior nodes, got {list(via)}", "via")
+            raise n.fail(f"'via' must list distinct interior nodes, got {name_list(via)}", "via")
     return Member(name, kind, start, end, elements, order, n.get("material").name_in(materials, "material"),
                   n.get("section").name_in(sections, "section"), up, arc, actuator, mass,
                   n.get("integration", "reduced").string(("reduced", "full")), via)
@@ -301,7 +295,7 @@ def _support(n: Node, nodes, members, shells) -> Support:
             raise n.fail("a support is on a 'node' or on a shell 'edge', not both")
         extra = sorted(k for k in n.value if k not in ("edge", "type"))
         if extra:
-            raise n.fail(f"key(s) {extra} do not apply to an edge support; expected 'edge' and 'type'")
+            raise n.fail(f"key(s) {name_list(extra)} do not apply to an edge support; expected 'edge' and 'type'")
         typ = n.get("type").string(("clamp", "ball"))
         return Support("", typ, edge=edge_ref(n.get("edge"), shells))
     typ = n.get("type").string(("clamp", "ball", "fixed_vector", "revolute", "driven"))
@@ -412,7 +406,7 @@ def _output(name: str, n: Node, nodes, members, shells) -> Output:
     need = OUTPUT_KINDS[kind]
     extra = sorted(k for k in n.value if k != "kind" and k not in need and not (kind == "shell_point" and k == "edge"))
     if extra:
-        raise n.fail(f"key(s) {extra} do not apply to output kind '{kind}'; expected {list(need)}")
+        raise n.fail(f"key(s) {name_list(extra)} do not apply to output kind '{kind}'; expected {list(need)}")
     node = n.get("node").name_in(nodes, "node") if "node" in need else None
     member = n.get("member").name_in(members, "member") if "member" in need else None
     if "shell" in need:
@@ -426,7 +420,7 @@ def _output(name: str, n: Node, nodes, members, shells) -> Output:
     if "members" in need:
         lst = [m.name_in(members, "member") for m in n.get("members").list()]
         if not 1 <= len(lst) <= 2:
-            raise n.fail(f"a joint angle relates 1 member (to its reference) or 2 members, got {lst}", "members")
+            raise n.fail(f"a joint angle relates 1 member (to its reference) or 2 members, got {name_list(lst)}", "members")
         for m in lst:
             mem = members[m]
             if mem.kind == "truss" or (mem.actuator and mem.actuator.variant == "bar"):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..errors import SceneError
+from ..errors import SceneError, excerpt, name_list
 
 _MISSING = object()
 
@@ -32,10 +32,10 @@ class Node:
     # -- structure ----------------------------------------------------------------------
     def mapping(self, allowed: set[str], required: set[str] = frozenset()) -> "Node":
         if not isinstance(self.value, dict):
-            raise self.fail(f"expected a mapping, got {type(self.value).__name__} {self.value!r}")
-        unknown = sorted(str(k) for k in self.value if k not in allowed)
+            raise self.fail(f"expected a mapping, got {_typed(self.value)}")
+        unknown = [k for k in self.value if k not in allowed]
         if unknown:
-            raise self.fail(f"unknown key(s) {unknown}; allowed keys: {sorted(allowed)}")
+            raise self.fail(f"unknown key(s) {name_list(sorted(unknown, key=str))}; allowed keys: {sorted(allowed)}")
         missing = sorted(k for k in required if k not in self.value)
         if missing:
             raise self.fail(f"missing required key(s) {missing}")
@@ -54,15 +54,15 @@ class Node:
 
     def items(self):
         if not isinstance(self.value, dict):
-            raise self.fail(f"expected a mapping, got {self.value!r}")
+            raise self.fail(f"expected a mapping, got {_typed(self.value)}")
         for k, v in self.value.items():
             if not isinstance(k, str) or not k:
-                raise self.fail(f"names must be non-empty strings, got {k!r}")
+                raise self.fail(f"names must be non-empty strings, got {excerpt(k)}")
             yield k, Node(v, f"{self.path}.{k}" if self.path else k, self.source)
 
     def list(self) -> list["Node"]:
         if not isinstance(self.value, list):
-            raise self.fail(f"expected a list, got {self.value!r}")
+            raise self.fail(f"expected a list, got {_typed(self.value)}")
         return [Node(v, f"{self.path}[{i}]", self.source) for i, v in enumerate(self.value)]
 
     # -- scalars ------------------------------------------------------------------------
@@ -70,60 +70,66 @@ class Node:
                lo: float | None = None, hi: float | None = None, unit: str = "") -> float:
         v = self.value
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(f"expected a number{' in ' + unit if unit else ''}, got {v!r}")
+            raise self.fail(f"expected a number{' in ' + unit if unit else ''}, got {excerpt(v)}")
         v = float(v)
         if not math.isfinite(v):
-            raise self.fail(f"expected a finite number, got {v!r}")
+            raise self.fail(f"expected a finite number, got {excerpt(v)}")
         if positive and v <= 0:
-            raise self.fail(f"expected a positive number{' (' + unit + ')' if unit else ''}, got {v!r}")
+            raise self.fail(f"expected a positive number{' (' + unit + ')' if unit else ''}, got {excerpt(v)}")
         if nonneg and v < 0:
-            raise self.fail(f"expected a non-negative number, got {v!r}")
+            raise self.fail(f"expected a non-negative number, got {excerpt(v)}")
         if lo is not None and v < lo:
-            raise self.fail(f"expected a number ≥ {lo}, got {v!r}")
+            raise self.fail(f"expected a number ≥ {lo}, got {excerpt(v)}")
         if hi is not None and v > hi:
-            raise self.fail(f"expected a number ≤ {hi}, got {v!r}")
+            raise self.fail(f"expected a number ≤ {hi}, got {excerpt(v)}")
         return v
 
     def integer(self, *, lo: int | None = None, hi: int | None = None) -> int:
         v = self.value
         if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(f"expected an integer, got {v!r}")
+            raise self.fail(f"expected an integer, got {excerpt(v)}")
         if lo is not None and v < lo:
-            raise self.fail(f"expected an integer ≥ {lo}, got {v!r}")
+            raise self.fail(f"expected an integer ≥ {lo}, got {excerpt(v)}")
         if hi is not None and v > hi:
-            raise self.fail(f"expected an integer ≤ {hi}, got {v!r}")
+            raise self.fail(f"expected an integer ≤ {hi}, got {excerpt(v)}")
         return v
 
     def string(self, choices: tuple[str, ...] | None = None) -> str:
         v = self.value
         if not isinstance(v, str) or not v:
-            raise self.fail(f"expected a non-empty string, got {v!r}")
+            raise self.fail(f"expected a non-empty string, got {excerpt(v)}")
         if choices is not None and v not in choices:
-            raise self.fail(f"expected one of {list(choices)}, got {v!r}")
+            raise self.fail(f"expected one of {list(choices)}, got {excerpt(v)}")
         return v
 
     def boolean(self) -> bool:
         if not isinstance(self.value, bool):
-            raise self.fail(f"expected true or false, got {self.value!r}")
+            raise self.fail(f"expected true or false, got {excerpt(self.value)}")
         return self.value
 
     def vector(self, n: int = 3, *, nonzero: bool = False, unit: str = "") -> tuple[float, ...]:
         v = self.value
         if not isinstance(v, list) or len(v) != n:
-            raise self.fail(f"expected a list of {n} numbers{' (' + unit + ')' if unit else ''}, got {v!r}")
+            raise self.fail(f"expected a list of {n} numbers{' (' + unit + ')' if unit else ''}, got {excerpt(v)}")
         out = tuple(Node(x, f"{self.path}[{i}]", self.source).number() for i, x in enumerate(v))
         if nonzero and all(x == 0.0 for x in out):
-            raise self.fail(f"expected a non-zero vector, got {v!r}")
+            raise self.fail(f"expected a non-zero vector, got {excerpt(v)}")
         return out
 
     def numbers(self, *, min_len: int = 1) -> tuple[float, ...]:
         v = self.value
         if not isinstance(v, list) or len(v) < min_len:
-            raise self.fail(f"expected a list of at least {min_len} numbers, got {v!r}")
+            raise self.fail(f"expected a list of at least {min_len} numbers, got {excerpt(v)}")
         return tuple(Node(x, f"{self.path}[{i}]", self.source).number() for i, x in enumerate(v))
 
     def name_in(self, table: dict, what: str) -> str:
         name = self.string()
         if name not in table:
-            raise self.fail(f"unknown {what} '{name}'; defined: {sorted(table)}")
+            raise self.fail(f"unknown {what} {excerpt(name)}; defined: {name_list(sorted(table))}")
         return name
+
+
+def _typed(value: Any) -> str:
+    """A bounded excerpt that also names a scalar's type (containers name theirs already)."""
+    text = excerpt(value)
+    return text if isinstance(value, (list, tuple, dict)) else f"{type(value).__name__} {text}"

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+from ..errors import excerpt, name_list
 from .reader import Node
 from .schema import EdgeLoad, EdgeRef, Shell, ShellJoint, ShellMeshSpec, Signal
 
@@ -51,7 +52,7 @@ def _mesh(n: Node, nodes) -> ShellMeshSpec:
     allowed, required = MESH_KEYS[kind]
     extra = sorted(k for k in n.value if k not in allowed | {"kind"})
     if extra:
-        raise n.fail(f"key(s) {extra} do not apply to a '{kind}' mesh; expected {sorted(allowed)}")
+        raise n.fail(f"key(s) {name_list(extra)} do not apply to a '{kind}' mesh; expected {sorted(allowed)}")
     missing = sorted(k for k in required if k not in n.value)
     if missing:
         raise n.fail(f"a '{kind}' mesh needs {missing}")
@@ -62,14 +63,14 @@ def _mesh(n: Node, nodes) -> ShellMeshSpec:
     else:
         lst = dn.list()
         if len(lst) != 2:
-            raise dn.fail(f"expected [n_u, n_v] element divisions, got {dn.value!r}")
+            raise dn.fail(f"expected [n_u, n_v] element divisions, got {excerpt(dn.value)}")
         divisions = tuple(x.integer(lo=1, hi=1000) for x in lst)
     if kind in ("rectangle", "triangle"):
         need = 4 if kind == "rectangle" else 3
         cn = n.get("corners")
         corners = tuple(c.name_in(nodes, "node") for c in cn.list())
         if len(corners) != need or len(set(corners)) != need:
-            raise cn.fail(f"a {kind} needs {need} distinct corner nodes, got {list(corners)}")
+            raise cn.fail(f"a {kind} needs {need} distinct corner nodes, got {name_list(corners)}")
         pts = [nodes[c] for c in corners]
         cross = _cross(_sub(pts[1], pts[0]), _sub(pts[-1], pts[0]))
         if math.sqrt(sum(c * c for c in cross)) <= 1e-12 * max(1e-300, _norm(_sub(pts[1], pts[0])) ** 2):
