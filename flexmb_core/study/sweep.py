@@ -256,6 +256,10 @@ def sweep(scene_path: str | Path, param_items: list[str], *, samples: int | None
           scheduler: Any = None, workers: int | None = None, retries: int = 2,
           progress: Callable[[SweepEvent], None] | None = None) -> SweepResult:
     """Plan, execute and write a sweep (``flexmb sweep``); returns its :class:`SweepResult`."""
+    if workers is not None and workers < 1:
+        raise FlexmbError(f"--workers must be a positive integer, got {workers}")
+    if retries < 0:
+        raise FlexmbError(f"--retries must be 0 or more, got {retries}")
     params, specs = plan(scene_path, param_items, samples=samples, distribution=distribution, seed=seed,
                          until=until, outputs=outputs, every=every)
     out = Path(out)
