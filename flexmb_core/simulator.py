@@ -22,6 +22,7 @@ from .model.model import Model
 from .model.workspace import State, Workspace
 from .observers import evaluate_output
 from .scene.schema import SolverSpec
+from .servo import Servo
 from .signals import evaluate
 from .solvers.result import StepResult
 
@@ -53,6 +54,11 @@ class Simulator:
         self._signal_actuators = [(i, s) for i, s in enumerate(act.commands) if s is not None and i not in driven]
         self._lengths = act.l0.copy()            # actuators with neither signal nor program hold L0
         self._program_buf = np.zeros(model.program_index.size)
+        # actuator servos (flexmb_core.servo): dynamics only — a static solve takes their steady
+        # state, the commanded length itself
+        self._servo = Servo(act.servo) if act.servo is not None and self.spec.analysis != "static" else None
+        self._servo_u = np.zeros(0 if act.servo is None else act.servo.size)
+        self.last_commands = act.l0.copy()       # (na,) m: commanded lengths of the last step, before any servo
         self.stats = RunStats()
         self.last: StepResult | None = None
         if self.spec.analysis == "static":
@@ -114,7 +120,13 @@ class Simulator:
         (gravity and loads carried, at rest) instead of the unloaded reference geometry, so the
         twin does not begin by dropping its own weight.
         """
-        self.state.lam[:] = self.command_lengths(self.state.t) / self.model.actuators.l0
+        lengths = self.command_lengths(self.state.t)
+        self.last_commands[:] = lengths
+        servo = self.model.actuators.servo
+        if servo is not None:             # servos start at rest on their commanded lengths
+            self.state.servo_x[:] = lengths[servo.index]
+            self.state.servo_v[:] = 0.0
+        self.state.lam[:] = lengths / self.model.actuators.l0
         if self._dynamic is not None:
             if self.spec.initial_state == "static":
                 pre = StaticSolver(self.model, self.ws, self.spec).solve_at(self.state, self.state.t,
@@ -132,7 +144,12 @@ class Simulator:
         step fails and the policy is ``stop`` or ``substep``; ``accept_flagged`` returns the flagged result."""
         dt = self.spec.dt if dt is None else dt
         t_new = self.state.t + dt
-        lam = (self.command_lengths(t_new) / self.model.actuators.l0) if self._lengths.size else self._lengths
+        if not self._lengths.size:
+            lam = self._lengths
+        elif self._servo is None:
+            lam = self.command_lengths(t_new) / self.model.actuators.l0
+        else:
+            lam = self._servo_lengths(self.command_lengths(t_new), dt) / self.model.actuators.l0
         t0 = time.perf_counter()
         if self._dynamic is not None:
             res = self._dynamic.step(self.state, dt, lam)
@@ -153,6 +170,16 @@ class Simulator:
         else:
             self.stats.max_residual = max(self.stats.max_residual, res.residual)
         return res
+
+    def _servo_lengths(self, lengths: np.ndarray, dt: float) -> np.ndarray:
+        """The servos' outputs at the end of this step in place of their commanded ``lengths (na,)``
+        (m); the servo state in :attr:`state` advances (a rejected step restores it with the state)."""
+        self.last_commands[:] = lengths
+        idx = self.model.actuators.servo.index
+        np.take(lengths, idx, out=self._servo_u)
+        self._servo.advance(self._servo_u, self.state.servo_x, self.state.servo_v, dt)
+        lengths[idx] = self.state.servo_x
+        return lengths
 
     def run(self, until: float, dt: float | None = None,
             callback: Callable[["Simulator", StepResult], None] | None = None) -> RunStats:

@@ -3,15 +3,31 @@
 Three input forms, one per topic of the node (see :mod:`ros2_node.topics`):
 
 - an array of lengths in scene order (``Float64MultiArray``: no stamp, applies from reception);
-- named lengths with optional rates, stamped (``ActuatorCommand``): between commands the length
-  follows ``L + v (t − stamp)`` (first-order hold), zero-order hold without rates;
+- named lengths with optional rates, stamped (``ActuatorCommand``);
 - a trajectory (``JointTrajectory``): points at ``stamp + time_from_start``, interpolated by cubic
-  Hermite when every point has velocities, linearly otherwise; it starts from the length in force
-  when it arrives and holds its last point.
+  Hermite when every point has velocities, linearly otherwise; it starts from the length (and
+  rate) in force when it arrives and holds its last point until a new command or the timeout,
+  which counts from the trajectory's end.
+
+A command stream is a sampled signal, not a staircase (``hold='ramp'``, the default). A new
+length is reached over one *observed command period* T — the median of the last intervals
+between commands on the same input, measured on the stamps when stamped and on arrival (the
+twin's time at acceptance) otherwise, bounded to [Δt, min(0.5 s, timeout)], Δt for the first
+command:
+
+- lengths without rates: a first-order hold, the linear ramp from the length in force at
+  acceptance t_a to the new length over [t_a, t_a + T] (continuous in length; at 100 Hz the twin
+  follows the samples one period late, as any causal interpolation must);
+- lengths with rates: the commanded line ``L + v (t − stamp)``, reached by the cubic Hermite
+  from the (length, rate) in force at t_a to the line's (length, rate) at t_a + T (continuous in
+  length and rate), followed afterwards.
+
+When one command arrives per time step (T = Δt) both are exactly the old zero-order hold.
+``hold='step'`` keeps that old behaviour for any stream: each length applies from the next step.
 
 A message is accepted whole or rejected whole, with a :class:`Rejection` that names the topic,
-the offending value and what was expected. Commands that address only some actuators leave the
-others on their current command.
+a bounded excerpt of the offending value and what was expected. Commands that address only some
+actuators leave the others on their current command.
 """
 
 from __future__ import annotations
@@ -25,6 +41,25 @@ import numpy as np
 SIZE, NOT_FINITE, STROKE, UNKNOWN_NAME, DUPLICATE_NAME, STALE, OUT_OF_ORDER, FUTURE, BAD_TRAJECTORY = (
     "size", "not_finite", "stroke", "unknown_name", "duplicate_name", "stale", "out_of_order", "future",
     "bad_trajectory")
+BAD_STAMP, RATE, TOO_LARGE = "bad_stamp", "rate", "too_large"
+
+HOLDS = ("smooth", "ramp", "step")
+MAX_HOLD_PERIOD = 0.5        # s: longest ramp (commands slower than this are still held over 0.5 s)
+_PERIOD_WINDOW = 8           # intervals in the median of the observed command period
+_EXCERPT = 6                 # values quoted in a rejection message
+_NAME_CHARS = 40             # characters of one name quoted in a rejection message
+
+
+def _short(x) -> str:
+    s = x if isinstance(x, str) else (f"{x:.6g}" if isinstance(x, (float, np.floating)) else repr(x))
+    return s if len(s) <= _NAME_CHARS else s[:_NAME_CHARS] + "…"
+
+
+def excerpt(values, limit: int = _EXCERPT) -> str:
+    """``[a, b, …]`` with at most ``limit`` items (each at most 40 characters) and the total count."""
+    n = len(values)
+    head = ", ".join(_short(values[i]) for i in range(min(n, limit)))
+    return f"[{head}]" if n <= limit else f"[{head}, … ({n} in all)]"
 
 
 @dataclass(frozen=True)
@@ -41,27 +76,91 @@ class Rejection:
 
 @dataclass
 class _Trajectory:
-    idx: np.ndarray          # (k,) actuator indices
+    idx: np.ndarray          # (k,) actuator indices (int64)
     times: np.ndarray        # (m,) s, increasing, times[0] = acceptance time
     lengths: np.ndarray      # (m, k) m
     rates: np.ndarray | None  # (m, k) m/s, or None → linear
 
-    def at(self, t: float) -> np.ndarray:
+    def at(self, t: float, rate: bool = False) -> np.ndarray:
+        """Lengths (m) at ``t``, or with ``rate`` their rates (m/s)."""
         ts = self.times
-        if t <= ts[0]:
-            return self.lengths[0]
-        if t >= ts[-1]:
-            return self.lengths[-1]
+        if t <= ts[0] or t >= ts[-1]:
+            if rate:
+                return np.zeros(self.idx.size) if self.rates is None or t > ts[-1] or t < ts[0] else \
+                    self.rates[0 if t <= ts[0] else -1].copy()
+            return self.lengths[0] if t <= ts[0] else self.lengths[-1]
         j = int(np.searchsorted(ts, t, side="right")) - 1
         h = ts[j + 1] - ts[j]
         s = (t - ts[j]) / h
         l0, l1 = self.lengths[j], self.lengths[j + 1]
         if self.rates is None:
-            return l0 + s * (l1 - l0)
-        v0, v1 = self.rates[j], self.rates[j + 1]
-        h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-        h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-        return h00 * l0 + h10 * h * v0 + h01 * l1 + h11 * h * v1
+            return (l1 - l0) / h if rate else l0 + s * (l1 - l0)
+        return _hermite(s, h, l0, self.rates[j], l1, self.rates[j + 1], rate)
+
+
+def _hermite(s, h, p0, v0, p1, v1, rate: bool = False):
+    """Cubic Hermite on [0, h] at s = t/h ∈ [0, 1]: value, or with ``rate`` its time derivative."""
+    if rate:
+        d00, d10 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1
+        d01, d11 = -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+        return (d00 * p0 + d01 * p1) / h + d10 * v0 + d11 * v1
+    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * p0 + h10 * h * v0 + h01 * p1 + h11 * h * v1
+
+
+class _Period:
+    """One input's observed command period and, for unstamped commands, a de-jittered sample clock.
+
+    The period is the mean of the last intervals that are not pauses (≤ 3× their median): arrival
+    jitter does not accumulate in a mean, where a median of quantized, jittered intervals is biased.
+    Its spread (max − min of those intervals) is 0 for a regular stream.
+
+    Arrival times (quantized to the twin's steps, delayed by the transport) are mapped onto a
+    regular sample clock by a second-order phase-locked loop: with the phase error
+    ``e = a_k − (τ_k−1 + T̂)``, ``τ_k = τ_k−1 + T̂ + β e`` and ``T̂ ← T̂ + γ e`` (γ = β²/4, critically
+    damped). The clock then moves by a fraction of a µs per sample where the arrivals jitter by
+    milliseconds — what the rate and acceleration estimates of the samples need. It starts on the
+    windowed mean and re-anchors on the arrival when the error exceeds 3 T̂ + 4 × spread (a pause,
+    a new stream)."""
+
+    WINDOW = 32
+    BETA = 0.005
+    GAMMA = BETA * BETA / 4.0
+
+    def __init__(self):
+        self.intervals = np.zeros(self.WINDOW)
+        self.n = 0
+        self.last = {True: math.nan, False: math.nan}    # stamped → last stamp; else last arrival
+        self.tau = math.nan
+        self.T_hat = math.nan
+
+    def observe(self, t: float, stamped: bool, floor: float) -> tuple[float | None, float, float, float]:
+        """(period or None for the first command, its spread, the sample time τ, the clock's step)
+        of a command at ``t`` (its stamp, or its arrival); ``floor`` (s) is the smallest clock step."""
+        prev = self.last[stamped]
+        self.last[stamped] = t
+        if math.isfinite(prev):
+            self.intervals[self.n % self.WINDOW] = t - prev
+            self.n += 1
+        est, spread = None, 0.0
+        if self.n:
+            iv = self.intervals[:min(self.n, self.WINDOW)]
+            med = float(np.median(iv))
+            iv = iv[iv <= 3.0 * med] if med > 0 else iv
+            est, spread = float(iv.mean()), float(iv.max() - iv.min())
+        if stamped:
+            return est, spread, t, max(est or 0.0, floor)
+        if self.n < self.WINDOW or not math.isfinite(self.T_hat):
+            self.T_hat = max(est or 0.0, floor)          # until the window is full: its mean
+        e = t - (self.tau + self.T_hat)
+        if abs(e) <= 3.0 * self.T_hat + 4.0 * spread:
+            self.tau += self.T_hat + self.BETA * e
+            if self.n >= self.WINDOW:
+                self.T_hat = max(self.T_hat + self.GAMMA * e, floor)
+        else:
+            self.tau = t
+        return est, spread, self.tau, self.T_hat
 
 
 class CommandSchedule:
@@ -73,32 +172,65 @@ class CommandSchedule:
     stroke : (na, 2) admissible lengths (m), inclusive
     rest : (na,) lengths at start (m): held until the first command, target of ``ramp_to_rest``
     timeout : s of simulated time without a command after which the timeout behaviour starts
-        (``inf`` disables it; a running trajectory is never timed out)
+        (``inf`` disables it); for a trajectory it counts from its last point
     behaviour : ``hold`` (keep the last length, stop extrapolating) or ``ramp_to_rest``
     ramp_time : s, duration of the smooth ramp to ``rest``
     stale_after : s, stamped commands older than ``now − stale_after`` are rejected
     max_lead : s, stamped commands later than ``now + max_lead`` are rejected (clock mismatch)
+    hold : ``ramp`` (first-order / Hermite hold over the observed command period) or ``step``
+    dt : s, the twin's time step: the shortest hold and the first command's period
+    max_rate : m/s, scalar or (na,): commanded rates beyond it are rejected (the servo's
+        ``max_rate`` where one is declared, ``max_command_rate`` otherwise)
+    max_points : most points a trajectory may have
     """
 
     def __init__(self, names, stroke: np.ndarray, rest: np.ndarray, *, timeout: float = math.inf,
                  behaviour: str = "hold", ramp_time: float = 1.0, stale_after: float = 1.0,
-                 max_lead: float = 1.0):
+                 max_lead: float = 1.0, hold: str = "smooth", dt: float = 1e-3, max_rate=10.0,
+                 max_points: int = 10000):
         if behaviour not in ("hold", "ramp_to_rest"):
             raise ValueError(f"timeout behaviour must be 'hold' or 'ramp_to_rest', got {behaviour!r}")
+        if hold not in HOLDS:
+            raise ValueError(f"command hold must be one of {list(HOLDS)}, got {hold!r}")
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be a positive number of s, got {dt!r}")
         self.names = tuple(names)
         self.index = {n: i for i, n in enumerate(self.names)}
         self.stroke = np.asarray(stroke, dtype=float)
         # admissible lengths: the stroke, and always > 0 (an undeclared stroke is [0, inf])
         self._lo = np.maximum(self.stroke[:, 0], np.nextafter(0.0, 1.0))
         self._hi = self.stroke[:, 1].copy()
-        self._all = np.arange(len(names))
+        na = len(self.names)
+        self._all = np.arange(na, dtype=np.int64)
         self.rest = np.asarray(rest, dtype=float).copy()
         self.timeout, self.behaviour, self.ramp_time = timeout, behaviour, ramp_time
         self.stale_after, self.max_lead = stale_after, max_lead
-        na = len(self.names)
-        self.base = self.rest.copy()         # length at the command's reference time
+        self.hold, self.dt, self.max_points = hold, float(dt), int(max_points)
+        self.max_rate = np.broadcast_to(np.asarray(max_rate, dtype=float), (na,)).copy()
+        self.max_period = max(self.dt, min(MAX_HOLD_PERIOD, timeout))
+        # the commanded line L(t) = base + rate (t − t_ref), per actuator
+        self.base = self.rest.copy()         # m, length at the reference time
         self.rate = np.zeros(na)             # m/s
         self.t_ref = np.zeros(na)            # s, reference time of base (the stamp)
+        # the hold segment that joins the previous command to the line: [seg_t0, seg_end)
+        self.seg_t0 = np.zeros(na)
+        self.seg_end = np.full(na, -math.inf)
+        self.seg_p0 = np.zeros(na)           # m, length in force at acceptance
+        self.seg_v0 = np.zeros(na)           # m/s, rate in force at acceptance (Hermite)
+        self.seg_cubic = np.zeros(na, dtype=bool)
+        # smooth hold of bare lengths: the target is the parabola through the last three samples
+        # (exact for constant acceleration), at the segment's end; after it the line is followed
+        # for one more period (a late sample), then its rate fades to rest over one period
+        self.fade_t = np.full(na, math.inf)  # s, start of the fade (inf: an explicit line, no fade)
+        self.fade_T = np.ones(na)            # s, its duration
+        self.hist_L = np.zeros((na, 2))      # m, the previous two samples of each actuator, newest first
+        self.hist_t = np.zeros((na, 2))      # s, their sample times
+        self.hist_n = np.zeros(na, dtype=np.int64)   # how many of them are usable (0–2)
+        self.hist_stamped = np.zeros(na, dtype=bool)
+        self._e = np.zeros(na)
+        self._periods: dict[str, _Period] = {}
+        self._grid = self.dt                 # s, grid step of the newest unstamped command's clock
+        self.last_period = self.dt           # s, the period of the newest hold (for reports and tests)
         self.trajectory: _Trajectory | None = None
         self.last_accept = -math.inf         # sim time of the newest accepted command
         self.last_stamp = -math.inf          # newest accepted stamp (ordering check)
@@ -106,6 +238,7 @@ class CommandSchedule:
         self._held: np.ndarray | None = None  # lengths frozen when the timeout started
         self._t_hold = 0.0
         self._out = np.zeros(na)
+        self._line = np.zeros(na)
         self.accepted = 0
         self.rejected = 0
 
@@ -119,23 +252,52 @@ class CommandSchedule:
         if ok.all():
             return None
         if not np.all(np.isfinite(values)):
-            bad = [f"{n}={v}" for n, v in zip(names, values) if not math.isfinite(v)]
-            return Rejection(topic, NOT_FINITE, f"lengths must be finite, got {', '.join(bad)}")
-        bad = [f"{n}={v:.6g} m (stroke [{a:.6g}, {b:.6g}] m)"
+            bad = [f"{_short(n)}={v}" for n, v in zip(names, values) if not math.isfinite(v)]
+            return Rejection(topic, NOT_FINITE, f"lengths must be finite, got {excerpt(bad)}")
+        bad = [f"{_short(n)}={v:.6g} m (stroke [{a:.6g}, {b:.6g}] m)"
                for n, v, a, b, o in zip(names, values, lo, hi, ok) if not o]
-        return Rejection(topic, STROKE, "lengths outside the actuator stroke: " + ", ".join(bad))
+        return Rejection(topic, STROKE, "lengths outside the actuator stroke: " + ", ".join(bad[:_EXCERPT])
+                         + (f", … ({len(bad)} in all)" if len(bad) > _EXCERPT else ""))
+
+    def _check_rates(self, topic: str, names, rates: np.ndarray, idx: np.ndarray,
+                     points: np.ndarray | None = None) -> Rejection | None:
+        """Finite and within the rate limit: ``rates (k,)`` of actuators ``idx``, or ``(m, k)`` rows of
+        the trajectory points ``points (m,)``. One vectorized test; messages on failure only."""
+        r2 = rates.reshape(-1, idx.size)
+        lim = self.max_rate[idx]
+        ok = np.abs(r2) <= lim                 # NaN fails too
+        if ok.all():
+            return None
+        j = int(np.flatnonzero(~ok.all(axis=1))[0])
+        where = "" if points is None else f"point {int(points[j])}: "
+        row = r2[j]
+        if not np.all(np.isfinite(row)):
+            bad = [f"{_short(n)}={v}" for n, v in zip(names, row) if not math.isfinite(v)]
+            return Rejection(topic, NOT_FINITE, f"{where}velocities must be finite, got {excerpt(bad)}")
+        bad = [f"{_short(n)}={v:.6g} m/s (limit {lm:.6g} m/s)" for n, v, lm in zip(names, row, lim) if abs(v) > lm]
+        return Rejection(topic, RATE, f"{where}rates beyond the actuator rate limit (the servo's max_rate where "
+                         f"declared, else the max_command_rate parameter): {excerpt(bad)}")
 
     def _check_names(self, topic: str, names) -> Rejection | None:
         unknown = [n for n in names if n not in self.index]
         if unknown:
-            return Rejection(topic, UNKNOWN_NAME, f"unknown actuator names {unknown}; "
-                             f"this twin has {list(self.names)}")
+            return Rejection(topic, UNKNOWN_NAME, f"unknown actuator names {excerpt(unknown)}; "
+                             f"this twin has {excerpt(self.names, 12)}")
         if len(set(names)) != len(names):
-            return Rejection(topic, DUPLICATE_NAME, f"actuator names repeated in {list(names)}")
+            seen, rep = set(), []
+            for n in names:
+                if n in seen:
+                    rep.append(n)
+                seen.add(n)
+            return Rejection(topic, DUPLICATE_NAME, f"actuator names repeated: {excerpt(rep)} "
+                             f"(each name at most once per message)")
         return None
 
     def _check_stamp(self, topic: str, stamp: float, now: float) -> Rejection | None:
-        if stamp <= 0.0:
+        if not math.isfinite(stamp) or stamp < 0.0:
+            return Rejection(topic, BAD_STAMP, f"header stamp {stamp:.9g} s is negative; expected the time the "
+                             "command is meant for on the twin's /clock (≥ 0), or 0 for 'now'")
+        if stamp == 0.0:
             return None
         if stamp < self.last_stamp:
             return Rejection(topic, OUT_OF_ORDER, f"stamp {stamp:.9f} s is older than the previous "
@@ -158,11 +320,11 @@ class CommandSchedule:
         v = np.asarray(values, dtype=float).ravel()
         if v.size != len(self.names):
             return self._reject(Rejection(topic, SIZE, f"expected {len(self.names)} lengths "
-                                          f"(actuators {list(self.names)}), got {v.size}"))
+                                          f"(actuators {excerpt(self.names, 12)}), got {v.size}: {excerpt(v)}"))
         r = self._check_lengths(topic, self.names, v)
         if r is not None:
             return self._reject(r)
-        self._apply(self._all, v, None, now, now, stamp=0.0)
+        self._apply(topic, self._all, v, None, now, now, stamp=0.0)
         return None
 
     def command_named(self, topic: str, names, lengths, velocities, stamp: float, now: float) -> Rejection | None:
@@ -171,78 +333,206 @@ class CommandSchedule:
         lengths = np.asarray(lengths, dtype=float).ravel()
         vel = None if velocities is None or len(velocities) == 0 else np.asarray(velocities, dtype=float).ravel()
         if not names:
-            return self._reject(Rejection(topic, SIZE, "no actuator names"))
+            return self._reject(Rejection(topic, SIZE, f"no actuator names (expected some of {excerpt(self.names)})"))
         if lengths.size != len(names):
-            return self._reject(Rejection(topic, SIZE, f"{len(names)} names but {lengths.size} lengths"))
+            return self._reject(Rejection(topic, SIZE, f"{len(names)} names but {lengths.size} lengths "
+                                          "(expected one length per name)"))
         if vel is not None and vel.size != len(names):
             return self._reject(Rejection(topic, SIZE, f"{len(names)} names but {vel.size} velocities "
                                           "(expected the same number, or none)"))
         r = self._check_names(topic, names)
-        idx = None if r else np.array([self.index[n] for n in names])
+        idx = None if r else np.array([self.index[n] for n in names], dtype=np.int64)
         r = r or self._check_lengths(topic, names, lengths, idx) or self._check_stamp(topic, stamp, now)
+        if r is None and vel is not None:
+            r = self._check_rates(topic, names, vel, idx)
         if r is not None:
             return self._reject(r)
-        if vel is not None and not np.all(np.isfinite(vel)):
-            return self._reject(Rejection(topic, NOT_FINITE, f"velocities must be finite, got {vel.tolist()}"))
-        self._apply(idx, lengths, vel, stamp if stamp > 0 else now, now, stamp=stamp)
+        self._apply(topic, idx, lengths, vel, stamp if stamp > 0 else now, now, stamp=stamp)
         return None
 
     def command_trajectory(self, topic: str, names, stamp: float, points, now: float) -> Rejection | None:
-        """``points``: sequence of (time_from_start s, positions (k,), velocities (k,) or empty)."""
+        """``points``: sequence of (time_from_start s, positions (k,), velocities (k,) or empty).
+
+        Validated vectorized over the points (a 10⁴-point trajectory costs milliseconds); at most
+        ``max_points`` points."""
+        m = len(points)
+        if m > self.max_points:
+            return self._reject(Rejection(topic, TOO_LARGE, f"{m} trajectory points; the limit is "
+                                          f"{self.max_points} (parameter max_trajectory_points)"))
         names = list(names)
+        if not names:
+            return self._reject(Rejection(topic, SIZE, "no joint_names; expected the names of the actuators the "
+                                          f"trajectory drives (some of {excerpt(self.names)})"))
         r = self._check_names(topic, names) or self._check_stamp(topic, stamp, now)
         if r is not None:
             return self._reject(r)
-        if not points:
-            return self._reject(Rejection(topic, BAD_TRAJECTORY, "no trajectory points"))
-        t0 = stamp if stamp > 0 else now
-        idx = np.array([self.index[n] for n in names])
-        times, pos, vel = [], [], []
-        for k, (tfs, p, v) in enumerate(points):
-            p = np.asarray(p, dtype=float).ravel()
-            if p.size != len(names):
-                return self._reject(Rejection(topic, SIZE, f"point {k}: {p.size} positions for {len(names)} joint names"))
-            r = self._check_lengths(topic, names, p, idx)
+        if m == 0:
+            return self._reject(Rejection(topic, BAD_TRAJECTORY, "no trajectory points (expected at least one)"))
+        k = len(names)
+        idx = np.array([self.index[n] for n in names], dtype=np.int64)
+        npos = np.fromiter((len(p[1]) for p in points), dtype=np.int64, count=m)
+        bad = np.flatnonzero(npos != k)
+        if bad.size:
+            j = int(bad[0])
+            return self._reject(Rejection(topic, SIZE, f"point {j}: {npos[j]} positions for {k} joint names "
+                                          f"{excerpt(names)} (expected one per name)"))
+        pos = np.array([p[1] for p in points], dtype=float).reshape(m, k)      # (m, k) m
+        ok = (pos >= self._lo[idx]) & (pos <= self._hi[idx])
+        if not ok.all():
+            j = int(np.flatnonzero(~ok.all(axis=1))[0])
+            r = self._check_lengths(topic, names, pos[j], idx)
+            return self._reject(Rejection(topic, r.kind, f"point {j}: {r.detail}"))
+        tfs = np.fromiter((p[0] for p in points), dtype=float, count=m)        # (m,) s
+        okt = np.isfinite(tfs) & (tfs >= 0)
+        okt[1:] &= tfs[1:] > tfs[:-1]
+        if not okt.all():
+            j = int(np.flatnonzero(~okt)[0])
+            return self._reject(Rejection(topic, BAD_TRAJECTORY, f"point {j}: time_from_start {tfs[j]:.9g} s must be "
+                                          f"finite, ≥ 0 and increasing (previous {tfs[j - 1] if j else math.nan:.9g} s)"))
+        nvel = np.fromiter((0 if p[2] is None else len(p[2]) for p in points), dtype=np.int64, count=m)
+        bad = np.flatnonzero((nvel != 0) & (nvel != k))
+        if bad.size:
+            j = int(bad[0])
+            return self._reject(Rejection(topic, SIZE, f"point {j}: {nvel[j]} velocities for {k} joint names "
+                                          "(expected one per name, or none)"))
+        vel = None
+        if nvel.any():
+            withv = np.flatnonzero(nvel == k)
+            vv = np.array([points[j][2] for j in withv], dtype=float).reshape(withv.size, k)
+            r = self._check_rates(topic, names, vv, idx, points=withv)
             if r is not None:
-                return self._reject(Rejection(topic, r.kind, f"point {k}: {r.detail}"))
-            if not math.isfinite(tfs) or (times and t0 + tfs <= times[-1]) or tfs < 0:
-                return self._reject(Rejection(topic, BAD_TRAJECTORY, f"point {k}: time_from_start {tfs} s "
-                                              "must be finite, ≥ 0 and increasing"))
-            times.append(t0 + tfs)
-            pos.append(p)
-            vel.append(None if v is None or len(v) == 0 else np.asarray(v, dtype=float).ravel())
-        use_rates = all(v is not None and v.size == len(names) and np.all(np.isfinite(v)) for v in vel)
-        current = self.lengths_at(now)[idx].copy()
-        if times[0] > now:        # start from the length in force now
-            times.insert(0, now)
-            pos.insert(0, current)
-            vel.insert(0, np.zeros(len(names)))
-        self.trajectory = _Trajectory(idx, np.array(times), np.array(pos),
-                                      np.array(vel) if use_rates else None)
+                return self._reject(r)
+            if withv.size == m:            # Hermite only when every point has rates; else linear
+                vel = vv
+        times = stamp + tfs if stamp > 0 else now + tfs
+        cur, vcur = self._in_force(now)
+        if times[0] > now:                 # start from the length (and rate) in force now
+            times = np.concatenate(([now], times))
+            pos = np.vstack((cur[idx], pos))
+            if vel is not None:
+                vel = np.vstack((vcur[idx], vel))
+        self._leave_trajectory_and_timeout(idx, now, cur)
+        self.seg_end[idx] = -math.inf
+        self.hist_n[idx] = 0
+        self.trajectory = _Trajectory(idx, times, pos, vel)
         self._mark_accepted(now, stamp)
         return None
 
-    def _apply(self, idx, lengths, rates, t_ref, now, stamp) -> None:
-        if self.trajectory is not None:    # a direct command takes these actuators off the trajectory
-            keep = ~np.isin(self.trajectory.idx, idx)
+    def _in_force(self, now: float) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the commanded lengths (m) and rates (m/s) in force at ``now`` (unclamped)."""
+        if self.timed_out(now):
+            self.lengths_at(now)               # sets the hold
+            return self._held_value(now).copy(), self._held_rate(now)
+        # the length in force is clamped to the stroke (a Hermite overshoot is cut there)
+        return np.clip(self._direct(now), self.stroke[:, 0], self.stroke[:, 1]), self._direct_rate(now)
+
+    def _leave_trajectory_and_timeout(self, idx, now: float, cur: np.ndarray) -> None:
+        """Actuators ``idx`` get a new command: take them off a running trajectory; after a timeout the
+        others resume on the lengths in force (``cur``)."""
+        if self.trajectory is not None:
+            tr = self.trajectory
+            keep = ~np.isin(tr.idx, idx)
             if not np.any(keep):
                 self.trajectory = None
-            elif not np.all(keep):
-                tr = self.trajectory
-                base_now = tr.at(now)
-                self.base[tr.idx] = base_now
-                self.rate[tr.idx] = 0.0
-                self.t_ref[tr.idx] = now
+            elif not np.all(keep):           # the rest stay on it: the dropped ones hold where they are
+                gone = tr.idx[~keep]
+                self.base[gone] = cur[gone]
+                self.rate[gone] = 0.0
+                self.t_ref[gone] = now
+                self.seg_end[gone] = -math.inf
+                self.fade_t[gone] = math.inf
                 self.trajectory = _Trajectory(tr.idx[keep], tr.times, tr.lengths[:, keep],
                                               None if tr.rates is None else tr.rates[:, keep])
-        if self._held is not None:        # back from a timeout: unaddressed actuators resume where they are
-            self.base[:] = self._held_value(now)
+        if self._held is not None:         # back from a timeout: unaddressed actuators resume where they are
+            self.base[:] = cur
             self.rate[:] = 0.0
             self.t_ref[:] = now
+            self.seg_end[:] = -math.inf
+            self.fade_t[:] = math.inf
+            self.hist_n[:] = 0
             self._held = None
-        self.base[idx] = lengths
-        self.rate[idx] = 0.0 if rates is None else rates
-        self.t_ref[idx] = t_ref
+            if self.trajectory is not None:
+                self.trajectory = None
+
+    def _period(self, topic: str, stamp: float, now: float) -> tuple[float, float]:
+        """(hold duration T, sample time τ) of a command on ``topic`` accepted at ``now``."""
+        est, spread, tau, grid = self._periods.setdefault(topic, _Period()).observe(
+            stamp if stamp > 0 else now, stamp > 0, self.dt)
+        self._grid = grid
+        # a cubic hold lasts the period plus four times the spread of the intervals: corrections of a
+        # jittery stream (a late or early sample moves the target by v × jitter) are spread over
+        # more than the jitter, while a regular stream keeps T = its period
+        T = self.dt if est is None else est + (4.0 * spread if self.hold == "smooth" else 0.0)
+        T = min(max(T, self.dt), self.max_period)
+        # a period within rounding of one step is one step: the hold then ends exactly at t_a + Δt,
+        # the time the next step evaluates, which makes one command per step the plain step hold
+        return (self.dt if T <= self.dt * (1.0 + 1e-6) else T), tau
+
+    def _predict(self, idx, lengths, tau: float, stamped: bool, T: float, t1: float):
+        """Length and rate at ``t1`` of the parabola through the new samples ``lengths`` (at ``τ``) and
+        the previous two of each actuator (a line with one, a constant with none usable); the history
+        is usable when on the same clock and at most 2.5 T apart."""
+        hl, ht = self.hist_L[idx], self.hist_t[idx]
+        h1 = tau - ht[:, 0]
+        h2 = ht[:, 0] - ht[:, 1]
+        if not stamped:     # unstamped samples are taken as regular: differences on the grid step,
+            # not on the de-jittered clock (whose small corrections the differences would amplify)
+            h1 = np.where(h1 > 0, self._grid, h1)
+            h2 = np.where(h2 > 0, self._grid, h2)
+        same = self.hist_stamped[idx] == stamped
+        n = np.where(same & (h1 > 0) & (h1 <= 2.5 * T), self.hist_n[idx], 0)
+        n = np.where((n == 2) & ~((h2 > 0) & (h2 <= 2.5 * T)), 1, n)
+        h1s, h2s = np.where(n >= 1, h1, 1.0), np.where(n == 2, h2, 1.0)
+        d1 = np.where(n >= 1, (lengths - hl[:, 0]) / h1s, 0.0)
+        d2 = (hl[:, 0] - hl[:, 1]) / h2s
+        acc = np.where(n == 2, 2.0 * (d1 - d2) / (h1s + h2s), 0.0)        # m/s²
+        vel = d1 + 0.5 * acc * np.where(n >= 1, h1s, 0.0)                  # m/s at τ
+        # the history shifts in (a sample that starts afresh keeps just itself)
+        self.hist_L[idx, 1] = hl[:, 0]
+        self.hist_t[idx, 1] = ht[:, 0]
+        self.hist_L[idx, 0] = lengths
+        self.hist_t[idx, 0] = tau
+        self.hist_n[idx] = np.minimum(n + 1, 2)
+        self.hist_stamped[idx] = stamped
+        # a sample is reached one period after its sample time, as a first-order hold reaches it:
+        # with one command per step (T = Δt) the target is the sample itself, bit for bit
+        dt1 = 0.0 if T == self.dt else t1 - self._grid - tau
+        return lengths + vel * dt1 + 0.5 * acc * dt1 * dt1, vel + acc * dt1
+
+    def _apply(self, topic, idx, lengths, rates, t_ref, now, stamp) -> None:
+        if self.hold != "step":
+            T, tau = self._period(topic, stamp, now)
+            cur, vcur = self._in_force(now)
+        else:
+            T, vcur = 0.0, None
+            cur = self._in_force(now)[0] if (self.trajectory is not None or self._held is not None
+                                             or self.timed_out(now)) else None
+        if cur is not None:
+            self._leave_trajectory_and_timeout(idx, now, cur)
+        self.fade_t[idx] = math.inf
+        if rates is not None:                 # the commanded line L + v (t − stamp)
+            self.base[idx] = lengths
+            self.rate[idx] = rates
+            self.t_ref[idx] = t_ref
+        elif self.hold == "smooth":           # the predicted line, reached at the segment's end
+            t1 = now + T
+            self.base[idx], self.rate[idx] = self._predict(idx, lengths, tau, stamp > 0, T, t1)
+            self.t_ref[idx] = t1
+            self.fade_t[idx] = t1 + T
+            self.fade_T[idx] = T
+        else:
+            self.base[idx] = lengths
+            self.rate[idx] = 0.0
+            self.t_ref[idx] = t_ref
+        if T > 0.0:
+            self.seg_t0[idx] = now
+            self.seg_end[idx] = now + T
+            self.seg_p0[idx] = cur[idx]
+            self.seg_v0[idx] = vcur[idx]
+            self.seg_cubic[idx] = rates is not None or self.hold == "smooth"
+            self.last_period = T
+        else:
+            self.seg_end[idx] = -math.inf
         self._mark_accepted(now, stamp)
 
     def _mark_accepted(self, now: float, stamp: float) -> None:
@@ -253,13 +543,59 @@ class CommandSchedule:
         self.newest_stamp = stamp
 
     # -- evaluation ----------------------------------------------------------------------------
+    def _elapsed(self, t: float) -> np.ndarray:
+        """Time (s, a reused buffer) travelled along each line at ``t``: ``t − t_ref``, slowed in the
+        fade (rate falling linearly to 0 over ``fade_T``), then frozen."""
+        e = self._e
+        np.subtract(t, self.t_ref, out=e)
+        fading = np.flatnonzero(t > self.fade_t)
+        if fading.size:
+            tau = np.minimum(t - self.fade_t[fading], self.fade_T[fading])
+            e[fading] = self.fade_t[fading] - self.t_ref[fading] + tau - tau * tau / (2.0 * self.fade_T[fading])
+        return e
+
+    def _segment(self, t: float, rate: bool):
+        """(actuators in their hold segment, their lengths or rates at ``t``), or None."""
+        seg = np.flatnonzero(t < self.seg_end)
+        if not seg.size:
+            return None
+        t0, t1 = self.seg_t0[seg], self.seg_end[seg]
+        T = t1 - t0
+        s = np.clip((t - t0) / T, 0.0, 1.0)
+        p0, base = self.seg_p0[seg], self.base[seg]
+        val = (base - p0) / T if rate else p0 + s * (base - p0)
+        cub = self.seg_cubic[seg]
+        if cub.any():            # Hermite onto the line's length and rate at the segment's end
+            v1 = self.rate[seg]
+            p1 = base + v1 * (t1 - self.t_ref[seg])
+            val = np.where(cub, _hermite(s, T, p0, self.seg_v0[seg], p1, v1, rate), val)
+        return seg, val
+
     def _direct(self, t: float) -> np.ndarray:
+        """Commanded lengths at ``t`` (m, a reused buffer): the lines, the hold segments, the trajectory."""
         out = self._out
-        np.multiply(self.rate, t - self.t_ref, out=out)
+        np.multiply(self.rate, self._elapsed(t), out=out)
         out += self.base
+        seg = self._segment(t, False)
+        if seg is not None:
+            out[seg[0]] = seg[1]
         if self.trajectory is not None:
             out[self.trajectory.idx] = self.trajectory.at(t)
         return out
+
+    def _direct_rate(self, t: float) -> np.ndarray:
+        """Commanded rates (m/s) at ``t`` (a new array)."""
+        v = self.rate.copy()
+        fading = np.flatnonzero(t > self.fade_t)
+        if fading.size:
+            tau = np.minimum(t - self.fade_t[fading], self.fade_T[fading])
+            v[fading] *= 1.0 - tau / self.fade_T[fading]
+        seg = self._segment(t, True)
+        if seg is not None:
+            v[seg[0]] = seg[1]
+        if self.trajectory is not None:
+            v[self.trajectory.idx] = self.trajectory.at(t, rate=True)
+        return v
 
     def _held_value(self, t: float) -> np.ndarray:
         if self.behaviour == "hold" or self._held is None:
@@ -268,15 +604,26 @@ class CommandSchedule:
         w = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)     # C² smoothstep
         return self._held + w * (self.rest - self._held)
 
+    def _held_rate(self, t: float) -> np.ndarray:
+        if self.behaviour == "hold" or self._held is None:
+            return np.zeros(len(self.names))
+        s = min(max((t - self._t_hold) / self.ramp_time, 0.0), 1.0)
+        dw = 30.0 * s * s * (1.0 - s) ** 2 / self.ramp_time
+        return dw * (self.rest - self._held)
+
+    def _quiet_since(self) -> float:
+        """Time from which the timeout counts: the newest command, or the end of a trajectory."""
+        tr = self.trajectory
+        return self.last_accept if tr is None else max(self.last_accept, float(tr.times[-1]))
+
     def timed_out(self, t: float) -> bool:
-        running = self.trajectory is not None and t < self.trajectory.times[-1]
-        return not running and self.last_accept > -math.inf and t - self.last_accept > self.timeout
+        return self.last_accept > -math.inf and t - self._quiet_since() > self.timeout
 
     def lengths_at(self, t: float) -> np.ndarray:
         """Commanded lengths (m) at simulated time ``t``, clamped to the stroke (a view: copy it)."""
         if self.timed_out(t):
             if self._held is None:
-                self._t_hold = self.last_accept + self.timeout
+                self._t_hold = self._quiet_since() + self.timeout
                 self._held = np.clip(self._direct(self._t_hold), self.stroke[:, 0], self.stroke[:, 1]).copy()
             self._out[:] = self._held_value(t)
             return self._out

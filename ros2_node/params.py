@@ -47,6 +47,15 @@ SPECS: tuple[ParamSpec, ...] = (
               low=1e-6, high=1e9),
     ParamSpec("max_lead", 1.0, "reject stamped commands ahead of the twin's time by more than this (s)",
               low=1e-6, high=1e9),
+    ParamSpec("command_hold", "smooth", "how a command stream becomes motion: smooth (default): each new length "
+              "is reached over the observed command period by a cubic Hermite, continuous in length and rate "
+              "(rates from the command, else from the last three samples); ramp: a linear ramp, continuous in length; "
+              "step: each command applies from the next step (the staircase of earlier versions)",
+              choices=("smooth", "ramp", "step")),
+    ParamSpec("max_command_rate", 10.0, "commanded rates (m/s) beyond this are rejected, for actuators without a "
+              "servo (a servo's max_rate is their limit)", low=1e-9, high=1e6),
+    ParamSpec("max_trajectory_points", 10000, "joint trajectories with more points are rejected", low=1,
+              high=10_000_000),
     ParamSpec("qos_depth", 10, "history depth of every publisher and subscription", low=1, high=100000),
     ParamSpec("publish_clock", True, "publish /clock with the simulated time (the node owns time)"),
     ParamSpec("duration", 0.0, "stop after this much simulated time (s); 0 = run until shutdown", low=0.0,
@@ -79,6 +88,9 @@ class NodeParams:
     ramp_time: float = 2.0
     stale_after: float = 1.0
     max_lead: float = 1.0
+    command_hold: str = "smooth"
+    max_command_rate: float = 10.0
+    max_trajectory_points: int = 10000
     qos_depth: int = 10
     publish_clock: bool = True
     duration: float = 0.0

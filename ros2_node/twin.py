@@ -21,7 +21,7 @@ from flexmb_core.report import TwinReporter, TwinSample
 from flexmb_core.scene.schema import SolverSpec
 from flexmb_core.simulator import Simulator
 
-from .commands import CommandSchedule, Rejection
+from .commands import HOLDS, CommandSchedule, Rejection
 from .messages import stamp_seconds
 from .shells import ShellShapes
 
@@ -36,6 +36,18 @@ class RunnerOptions:
     ramp_time: float = 2.0                # s
     stale_after: float = 1.0              # s
     max_lead: float = 1.0                 # s
+    command_hold: str = "smooth"          # smooth (C¹) | ramp (linear) | step: see ros2_node.commands
+    max_command_rate: float = 10.0        # m/s, commanded rates beyond are rejected (actuators without a servo)
+    max_trajectory_points: int = 10000    # longer trajectories are rejected
+
+    @classmethod
+    def from_params(cls, p) -> "RunnerOptions":
+        """The options of a node's :class:`~ros2_node.params.NodeParams` (same names; the timeout
+        behaviour is ``command_timeout_behaviour`` there)."""
+        return cls(command_source=p.command_source, command_timeout=p.command_timeout,
+                   timeout_behaviour=p.command_timeout_behaviour, ramp_time=p.ramp_time, stale_after=p.stale_after,
+                   max_lead=p.max_lead, command_hold=p.command_hold, max_command_rate=p.max_command_rate,
+                   max_trajectory_points=p.max_trajectory_points)
 
     def validate(self) -> None:
         if self.command_source not in ("external", "scene"):
@@ -43,10 +55,14 @@ class RunnerOptions:
         if self.timeout_behaviour not in ("hold", "ramp_to_rest"):
             raise FlexmbError(f"command_timeout_behaviour must be 'hold' or 'ramp_to_rest', got "
                               f"{self.timeout_behaviour!r}")
-        for name in ("command_timeout", "ramp_time", "stale_after", "max_lead"):
+        if self.command_hold not in HOLDS:
+            raise FlexmbError(f"command_hold must be one of {list(HOLDS)}, got {self.command_hold!r}")
+        for name in ("command_timeout", "ramp_time", "stale_after", "max_lead", "max_command_rate"):
             v = getattr(self, name)
             if not (v > 0):
-                raise FlexmbError(f"{name} must be > 0 (s), got {v}")
+                raise FlexmbError(f"{name} must be > 0, got {v}")
+        if not (self.max_trajectory_points >= 1 and float(self.max_trajectory_points).is_integer()):
+            raise FlexmbError(f"max_trajectory_points must be an integer ≥ 1, got {self.max_trajectory_points!r}")
 
 
 @dataclass
@@ -109,10 +125,16 @@ class TwinRunner:
         act = self.model.actuators
         rest = self.sim.command_lengths(self.sim.state.t)
         if self.options.command_source == "external" and act.l0.size:
-            self.schedule = CommandSchedule(act.names, act.stroke, rest, timeout=self.options.command_timeout,
-                                            behaviour=self.options.timeout_behaviour,
-                                            ramp_time=self.options.ramp_time,
-                                            stale_after=self.options.stale_after, max_lead=self.options.max_lead)
+            o = self.options
+            # commanded rates are limited by the servo where the scene declares one
+            max_rate = np.full(act.l0.size, float(o.max_command_rate))
+            if act.servo is not None:
+                max_rate[act.servo.index] = act.servo.max_rate
+            self.schedule = CommandSchedule(act.names, act.stroke, rest, timeout=o.command_timeout,
+                                            behaviour=o.timeout_behaviour, ramp_time=o.ramp_time,
+                                            stale_after=o.stale_after, max_lead=o.max_lead, hold=o.command_hold,
+                                            dt=self.dt, max_rate=max_rate,
+                                            max_points=int(o.max_trajectory_points))
             self.sim.set_commands(rest)
         self.sim.initialize()
         self._backup = self.sim.state.copy()
@@ -206,8 +228,11 @@ def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejec
                                     list(get(msg, "velocities")), stamp_seconds(st))
     if topic_kind == "joint_trajectory":
         st = get(get(msg, "header"), "stamp")
-        pts = [(stamp_seconds(get(p, "time_from_start")), list(get(p, "positions")), list(get(p, "velocities")))
-               for p in get(msg, "points")]
+        raw = get(msg, "points")
+        limit = runner.options.max_trajectory_points
+        # beyond the limit the schedule rejects on the count alone: do not convert a huge message
+        pts = raw if len(raw) > limit else [(stamp_seconds(get(p, "time_from_start")), get(p, "positions"),
+                                             get(p, "velocities")) for p in raw]
         return runner.command_trajectory(topic, list(get(msg, "joint_names")),
                                          stamp_seconds(st), pts)
     raise ValueError(f"unknown command topic kind {topic_kind!r}")

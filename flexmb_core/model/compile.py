@@ -13,6 +13,7 @@ from .. import sections as secmod
 from ..errors import SceneError, excerpt, name_list, thousands
 from ..scene.limits import Limits, check_size
 from ..scene.schema import Member, Scene, Signal
+from ..servo import ServoParams
 from .frame_geometry import frame_element_geometry, frame_element_mass
 from .model import Actuators, Drives, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
 from .shell_compile import (build_shell_groups, clamp_node_gdofs, compact_drafts, edge_load_patterns,
@@ -470,7 +471,7 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
         program = build_program(scene.commands, act_l0[program_index], f"{scene.source}:commands")
     mass_csr = (mfull.indptr.astype(np.int64), mfull.indices.astype(np.int64), mfull.data.astype(float))
     actuators = Actuators(tuple(act_names), np.array([member_lookup[n] for n in act_names], dtype=np.int64),
-                          act_l0, act_cmd, act_stroke, act_ends)
+                          act_l0, act_cmd, act_stroke, act_ends, _servo_params(scene, act_names, act_stroke))
     _freeze(q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, *mass_csr, load_vectors,
             gravity_vector, node_ydofs, act_l0, act_stroke, act_ends, actuators.member)
     return Model(scene, ndof, q0_arr, dof_scale, free, free_index, indptr, indices, mass_kdata, mass_csr,
@@ -479,6 +480,20 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
                  scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
                  *hinge_arrays, node_lookup, member_lookup, shell_groups, shells, *tie_arrays)
+
+
+def _servo_params(scene: Scene, act_names: list[str], act_stroke: np.ndarray) -> ServoParams | None:
+    """The declared servos as arrays (:mod:`flexmb_core.servo`); None when no actuator has one."""
+    specs = [(i, scene.members[n].actuator.servo) for i, n in enumerate(act_names)
+             if scene.members[n].actuator.servo is not None]
+    if not specs:
+        return None
+    idx = np.array([i for i, _ in specs], dtype=np.int64)
+    col = lambda f: np.array([f(s) for _, s in specs], dtype=float)  # noqa: E731
+    p = ServoParams(idx, col(lambda s: 2.0 * math.pi * s.bandwidth_hz), col(lambda s: s.damping_ratio),
+                    col(lambda s: s.max_rate), col(lambda s: s.max_accel), np.ascontiguousarray(act_stroke[idx]))
+    _freeze(p.index, p.wn, p.zeta, p.max_rate, p.max_accel, p.stroke)
+    return p
 
 
 def _element_geometry(where: str, e: int, *args):

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..scene.schema import Scene, Signal
+from ..servo import ServoParams
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,7 @@ class Actuators:
     commands: tuple[Signal | None, ...]
     stroke: np.ndarray              # (na, 2) (m); [0, inf] when undeclared
     end_ydofs: np.ndarray           # (na, 6) ids of the two end positions
+    servo: ServoParams | None = None   # the actuators that declare a servo (None: none does)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,9 @@ class State:
     stretch L_cmd/L0; ``lam_rate (na,)`` its rate dλ/dt (1/s), which material damping reads
     (commanded extension moves the actuator's reference and is not damped); the dynamic
     integrator keeps it for models with material damping, it stays zero otherwise.
+    ``servo_x, servo_v (ns,)``: output length (m) and rate (m/s) of the actuators that declare a
+    servo (``model.actuators.servo``, :mod:`flexmb_core.servo`), empty without; they roll back
+    with the rest of the state when a step is rejected.
     """
 
     t: float
@@ -30,20 +33,29 @@ class State:
     lam: np.ndarray
     mult: np.ndarray        # (6·corners,) Lagrange multipliers of rigid corners (N·m)
     lam_rate: np.ndarray | None = None   # (na,) 1/s; zeros when not given
+    servo_x: np.ndarray | None = None    # (ns,) m; empty when not given
+    servo_v: np.ndarray | None = None    # (ns,) m/s
 
     def __post_init__(self) -> None:
         if self.lam_rate is None:
             self.lam_rate = np.zeros(self.lam.shape)
+        if self.servo_x is None:
+            self.servo_x = np.zeros(0)
+        if self.servo_v is None:
+            self.servo_v = np.zeros(self.servo_x.shape)
 
     @classmethod
     def at_rest(cls, model: Model, t: float = 0.0) -> "State":
         n = model.ndof
+        servo = model.actuators.servo
+        ns = 0 if servo is None else servo.size
+        servo_x = np.zeros(ns) if servo is None else model.actuators.l0[servo.index].copy()
         return cls(t, model.q0.copy(), np.zeros(n), np.zeros(n), np.zeros(n),
-                   np.ones(model.actuators.l0.size), np.zeros(model.n_multipliers))
+                   np.ones(model.actuators.l0.size), np.zeros(model.n_multipliers), None, servo_x, np.zeros(ns))
 
     def copy(self) -> "State":
         return State(self.t, self.q.copy(), self.v.copy(), self.a.copy(), self.atil.copy(), self.lam.copy(),
-                     self.mult.copy(), self.lam_rate.copy())
+                     self.mult.copy(), self.lam_rate.copy(), self.servo_x.copy(), self.servo_v.copy())
 
     def assign(self, other: "State") -> None:
         """Copy ``other`` into this state's arrays (no allocation)."""
@@ -55,6 +67,8 @@ class State:
         self.lam[:] = other.lam
         self.mult[:] = other.mult
         self.lam_rate[:] = other.lam_rate
+        self.servo_x[:] = other.servo_x
+        self.servo_v[:] = other.servo_v
 
 
 class Workspace:

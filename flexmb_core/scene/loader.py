@@ -13,7 +13,7 @@ from . import strict_yaml
 from .limits import DEFAULT_LIMITS, Limits, over_limit
 from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
-                     Output, PointMass, Scene, SectionSpec, Signal, SolverSpec, Support)
+                     Output, PointMass, Scene, SectionSpec, ServoSpec, Signal, SolverSpec, Support)
 from .shells import edge_ref, parse_edge_loads, parse_shell, parse_shell_joint
 
 OUTPUT_KINDS = {
@@ -248,14 +248,15 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
         raise n.fail(f"nodes '{start}' and '{end}' coincide: a member needs a positive length")
     actuator = None
     if kind == "actuator":
-        a = n.get("actuator", {}).mapping({"variant", "command", "stroke"})
+        a = n.get("actuator", {}).mapping({"variant", "command", "stroke", "servo"})
         stroke = None
         if a.has("stroke"):
             stroke = a.get("stroke").vector(2, unit="m")
             if not 0.0 < stroke[0] < stroke[1]:
                 raise a.fail(f"expected 0 < min < max (m), got {list(stroke)}", "stroke")
         actuator = ActuatorSpec(a.get("variant", "frame").string(("frame", "bar")),
-                                signal(a.get("command")) if a.has("command") else None, stroke)
+                                signal(a.get("command")) if a.has("command") else None, stroke,
+                                _servo(a.get("servo")) if a.has("servo") else None)
     elif n.has("actuator"):
         raise n.fail(f"only members of kind 'actuator' take an 'actuator' block (kind is '{kind}')", "actuator")
     is_bar = kind == "truss" or (actuator is not None and actuator.variant == "bar")
@@ -286,6 +287,16 @@ def _member(name: str, n: Node, materials, sections, nodes) -> Member:
     return Member(name, kind, start, end, elements, order, n.get("material").name_in(materials, "material"),
                   n.get("section").name_in(sections, "section"), up, arc, actuator, mass,
                   n.get("integration", "reduced").string(("reduced", "full")), via)
+
+
+def _servo(n: Node) -> ServoSpec:
+    """``actuator.servo``: every key required, positive and finite (SI)."""
+    keys = {"bandwidth_hz", "damping_ratio", "max_rate", "max_accel"}
+    n.mapping(keys, keys)
+    return ServoSpec(n.get("bandwidth_hz").number(positive=True, unit="Hz"),
+                     n.get("damping_ratio").number(positive=True),
+                     n.get("max_rate").number(positive=True, unit="m/s"),
+                     n.get("max_accel").number(positive=True, unit="m/s²"))
 
 
 def _support(n: Node, nodes, members, shells) -> Support:

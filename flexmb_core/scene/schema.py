@@ -63,10 +63,23 @@ class SectionSpec:
 
 
 @dataclass(frozen=True)
+class ServoSpec:
+    """An actuator's position servo (see :mod:`flexmb_core.servo`): the actuator's length x
+    follows the commanded length u by x'' = ωn²(u − x) − 2ζωn x' with ωn = 2π ``bandwidth_hz``,
+    ζ = ``damping_ratio``, |x'| ≤ ``max_rate`` (m/s) and |x''| ≤ ``max_accel`` (m/s²)."""
+
+    bandwidth_hz: float
+    damping_ratio: float
+    max_rate: float
+    max_accel: float
+
+
+@dataclass(frozen=True)
 class ActuatorSpec:
     variant: str                     # frame | bar
     command: Signal | None           # commanded length L(t) (m); None → hold the reference length
     stroke: tuple[float, float] | None
+    servo: ServoSpec | None = None   # None: the length is the commanded length (an ideal actuator)
 
 
 @dataclass(frozen=True)

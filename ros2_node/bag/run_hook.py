@@ -154,7 +154,10 @@ class McapRunHook:
         wall = sim.stats.wall_time_s
         self._step_wall, self._wall_prev = wall - self._wall_prev, wall
         if self.l0.size:
-            lengths = exact_lengths(sim.state.lam, self.l0, self._lengths)
+            # with servos the solver's stretches are the servos' outputs: record their input, which
+            # a replay feeds through the same servos
+            lengths = (exact_lengths(sim.state.lam, self.l0, self._lengths) if self.model.actuators.servo is None
+                       else sim.last_commands)
             rec.write(self.t_commands, T.COMMANDS.type, M.float64_array(lengths), self._t_prev)
         self._t_prev = t
         if self._outputs.due(t):

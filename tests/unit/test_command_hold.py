@@ -1,0 +1,319 @@
+"""Commands as a sampled signal (issue 12) and bad command input (issue 15), without ROS.
+
+- the holds: ``ramp`` continuous in length, Hermite (rates given) and ``smooth`` (bare lengths)
+  continuous in length and rate; the observed period on stamps and on arrival;
+- a trajectory holds its last point past ``command_timeout`` (schedule and a Stewart twin);
+- the Stewart appendix motion sent as bare lengths at 100 Hz and 1 kHz, with arrival jitter, gives
+  the peak leg force of the smooth run within 10 % (the old step hold: ×100 and more);
+- every rejection kind with its message; the player's table lookup equals ``np.interp``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexmb_core.model.compile import compile_scene
+from flexmb_core.scene import load_scene
+from flexmb_core.simulator import Simulator
+from ros2_node import commands as C
+from ros2_node.commands import CommandSchedule
+from ros2_node.player import CommandSource, TableLookup
+from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"
+NAMES = ("a", "b")
+STROKE = np.array([[0.5, 1.5], [0.5, 1.5]])
+DT = 1e-3
+
+
+def _schedule(**kw) -> CommandSchedule:
+    kw.setdefault("dt", DT)
+    kw.setdefault("timeout", 0.5)
+    return CommandSchedule(NAMES, STROKE, np.array([1.0, 1.0]), **kw)
+
+
+def _trace(cs: CommandSchedule, events, t_end: float, h: float = 1e-4):
+    """Feed ``events`` [(t, fn(cs, now))] at their times, sample the lengths every ``h`` s."""
+    out, ev, t = [], list(events), 0.0
+    n = int(round(t_end / h))
+    for k in range(n + 1):
+        t = k * h
+        while ev and ev[0][0] <= t + 1e-12:
+            assert ev.pop(0)[1](cs, t) is None
+        out.append(cs.lengths_at(t).copy())
+    return np.arange(n + 1) * h, np.array(out)
+
+
+# --- holds ------------------------------------------------------------------------------------
+def test_ramp_is_continuous_in_length_and_reaches_each_sample_one_period_later():
+    cs = _schedule(hold="ramp")
+    vals = [1.0, 1.01, 1.03, 1.02, 1.06, 1.06]
+    ev = [(0.01 * k, lambda c, now, v=v: c.command_array("/c", [v, 2.0 - v], now)) for k, v in enumerate(vals)]
+    t, L = _trace(cs, ev, 0.08)
+    jumps = np.abs(np.diff(L[:, 0]))
+    # biggest sample change 0.04 m over a 10 ms period: ≤ 0.04 × 1e-4/1e-2 per 0.1 ms sample
+    assert jumps.max() <= 0.04 * 1e-2 + 1e-12
+    assert cs.last_period == pytest.approx(0.01, abs=1e-9)
+    i = int(round(0.05 / 1e-4))         # the sample of t = 0.04 s is reached at 0.05 s
+    assert L[i, 0] == pytest.approx(1.06, abs=1e-12)
+
+
+def test_step_hold_keeps_the_staircase():
+    cs = _schedule(hold="step")
+    ev = [(0.0, lambda c, now: c.command_array("/c", [1.0, 1.0], now)),
+          (0.01, lambda c, now: c.command_array("/c", [1.05, 1.0], now))]
+    t, L = _trace(cs, ev, 0.02)
+    assert np.abs(np.diff(L[:, 0])).max() == pytest.approx(0.05, abs=1e-12)
+
+
+def _rate(t, L):
+    return np.diff(L, axis=0) / np.diff(t)[:, None]
+
+
+def test_hermite_hold_is_continuous_in_length_and_rate():
+    cs = _schedule()
+    # stamped lengths with rates at 100 Hz that do not agree with each other (a controller's line
+    # L + v (t − stamp) jumps at each command): the hold joins them C¹
+    cmds = [(0.01 * k, 1.0 + 0.02 * k + 0.003 * (-1) ** k, 2.0 + 0.1 * (-1) ** k) for k in range(1, 7)]
+    ev = [(s, lambda c, now, s=s, L=L, v=v: c.command_named("/a", ["a"], [L], [v], s, now)) for s, L, v in cmds]
+    t, L = _trace(cs, ev, 0.09, h=1e-5)
+    after = t[1:] > 0.0115          # after the first hold (the first command has no period yet: Δt)
+    v = _rate(t, L)[:, 0]
+    assert np.abs(np.diff(L[:, 0])[after]).max() < 5.0 * 1e-5       # no length jump (|v| < 5 m/s)
+    assert np.abs(np.diff(v)[after[1:]]).max() < 0.05               # no rate jump (|a| < 5e3 m/s²)
+    # one period after the last command the twin is on its line L + v (t − stamp)
+    s, L6, v6 = cmds[-1]
+    i = int(round(0.085 / 1e-5))
+    assert L[i, 0] == pytest.approx(L6 + v6 * (0.085 - s), abs=1e-9)
+
+
+def test_smooth_hold_of_bare_lengths_is_continuous_in_rate_and_follows_a_parabola_exactly():
+    cs = _schedule()
+    f = lambda t: 1.0 + 0.1 * t + 2.0 * t * t                        # noqa: E731  (constant acceleration)
+    ev = [(0.01 * k, lambda c, now, k=k: c.command_array("/c", [f(0.01 * k), 1.0], now)) for k in range(30)]
+    t, L = _trace(cs, ev, 0.3, h=1e-4)
+    v = _rate(t, L)[:, 0]
+    assert np.abs(np.diff(v)).max() < 0.01          # rate continuous (4 m/s² × 1e-4 s = 4e-4 per sample)
+    # once three samples are known the hold is the parabola, one period late, to round-off
+    tt = t[(t > 0.05) & (t < 0.29)]
+    Lt = L[(t > 0.05) & (t < 0.29), 0]
+    np.testing.assert_allclose(Lt, f(tt - 0.01), atol=1e-12)
+
+
+def test_period_is_observed_on_stamps_and_on_arrival():
+    cs = _schedule()
+    for k in range(1, 12):                          # stamped 50 Hz, arriving at irregular twin times
+        now = 0.02 * k + (0.003 if k % 2 else 0.0)
+        assert cs.command_named("/a", ["a"], [1.0], [], 0.02 * k, now) is None
+    assert cs.last_period == pytest.approx(0.02, abs=1e-9)
+    cs = _schedule()
+    for k in range(12):                             # unstamped, arriving every 7 ms on a 1 ms twin
+        assert cs.command_array("/c", [1.0, 1.0], 0.007 * k) is None
+    assert cs.last_period == pytest.approx(0.007, abs=1e-9)
+    cs = _schedule()
+    assert cs.command_array("/c", [1.0, 1.0], 0.0) is None
+    assert cs.last_period == DT                     # the first command: the twin's Δt
+
+
+# --- trajectories and the timeout -----------------------------------------------------------------
+def _points(n=5, span=2.0, L0=1.0, dL=0.035):
+    return [(span * k / (n - 1), [L0 + dL * k / (n - 1), 1.0], []) for k in range(n)]
+
+
+def test_trajectory_longer_than_the_timeout_holds_its_last_point():
+    cs = _schedule(timeout=0.5)
+    assert cs.command_trajectory("/j", ["a", "b"], 0.0, _points(), 0.0) is None
+    for t in (1.0, 1.9, 2.0, 2.3, 2.6, 5.0):
+        L = cs.lengths_at(t)
+        assert L[0] == pytest.approx(1.0 + 0.035 * min(t, 2.0) / 2.0, abs=1e-12), t
+    assert cs.timed_out(2.6) and not cs.timed_out(2.4)   # the timeout counts from the end (2.0 s)
+
+
+@pytest.fixture(scope="module")
+def stewart():
+    model = compile_scene(load_scene(str(SCENE)))
+    return model, Simulator(model)
+
+
+@pytest.mark.parametrize("with_rates", [False, True])
+def test_stewart_trajectory_ends_at_its_last_point_without_a_force_spike(stewart, with_rates):
+    """2 s, 5 points, 35 mm, default parameters (command_timeout 0.5 s): the old schedule jumped to the
+    value at acceptance + timeout and held it (a 1.67 MN spike)."""
+    model, prog = stewart
+    runner = TwinRunner(model)
+    runner.start(warmup=False)
+    L0 = prog.command_lengths(0.0)
+    sign = np.array([1, -1, 1, -1, 1, -1])
+    # with rates: the slope inside, at rest at both ends (cubic Hermite); without: linear
+    rate = lambda k: (0.035 / 2.0 * sign).tolist() if 0 < k < 4 else [0.0] * 6   # noqa: E731
+    pts = [(0.5 * k, list(L0 + 0.035 * (k / 4) * sign), rate(k) if with_rates else []) for k in range(5)]
+    names = list(model.actuators.names)
+    assert runner.command_trajectory("/flexmb_twin/joint_trajectory", names, 0.0, pts) is None
+    during = after = 0.0
+    while runner.t < 3.0 - 1e-9:
+        assert runner.step().advanced
+        f = float(np.abs(runner.sample(full=False).actuator_forces).max())
+        if runner.t <= 2.1:
+            during = max(during, f)
+        elif runner.t >= 2.4:                       # across the timeout (2.5 s) and after it
+            after = max(after, f)
+    np.testing.assert_allclose(runner.sample().actuator_commands, pts[-1][1], atol=1e-12)
+    assert runner.schedule.timed_out(runner.t)
+    # holding the last point adds nothing: the legs carry the quasi-static load (~100 N) and the
+    # fading ringing of the trajectory's own corners
+    assert after <= during, (during, after)
+    assert during < (300.0 if with_rates else 2e3), during
+
+
+# --- the force test ---------------------------------------------------------------------------
+def _peak_force(model, prog, rate: float | None, jitter: float, hold: str = "smooth", t_end: float = 2.5,
+                seed: int = 12) -> float:
+    """Peak |leg force| (N) over [0, t_end] for the scene's own commands (rate None) or the same law
+    sampled at ``rate`` Hz and delivered as bare Float64MultiArray lengths with a seeded uniform
+    arrival delay in [0, jitter] s (arrivals in order)."""
+    opts = RunnerOptions(command_source="scene") if rate is None else RunnerOptions(command_hold=hold)
+    runner = TwinRunner(model, options=opts)
+    runner.start(warmup=False)
+    nt = int(t_end * (rate or 1)) + 2
+    tn = np.arange(nt) / (rate or 1)
+    arrive = np.maximum.accumulate(tn + np.random.default_rng(seed).uniform(0.0, jitter, nt))
+    k, peak = 0, 0.0
+    while runner.t < t_end - 1e-9:
+        while rate is not None and k < nt and arrive[k] <= runner.t + 1e-12:
+            assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k])) is None
+            k += 1
+        assert runner.step().advanced
+        peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
+    return peak
+
+
+@pytest.mark.parametrize("rate,jitter", [(100.0, 0.0), (100.0, 0.004), (1000.0, 0.0), (1000.0, 0.0015)])
+def test_sampled_stream_gives_the_smooth_peak_force(stewart, rate, jitter):
+    model, prog = stewart
+    smooth = _peak_force(model, prog, None, 0.0)
+    assert 100.0 < smooth < 300.0                    # the quasi-static leg forces of the appendix law
+    sampled = _peak_force(model, prog, rate, jitter)
+    assert abs(sampled - smooth) <= 0.10 * smooth, (rate, jitter, sampled, smooth)
+
+
+def test_the_step_hold_is_what_rang_the_legs(stewart):
+    model, prog = stewart
+    smooth = _peak_force(model, prog, None, 0.0, t_end=1.0)
+    assert _peak_force(model, prog, 100.0, 0.004, hold="step", t_end=1.0) > 20 * smooth
+    assert _peak_force(model, prog, 100.0, 0.004, hold="ramp", t_end=1.0) > 5 * smooth
+
+
+# --- rejections (issue 15) ----------------------------------------------------------------------
+def _traj_msg(names, points, sec=0):
+    return {"header": {"stamp": {"sec": sec, "nanosec": 0}}, "joint_names": names,
+            "points": [{"time_from_start": {"sec": int(t), "nanosec": int(round((t % 1) * 1e9))},
+                        "positions": p, "velocities": v} for t, p, v in points]}
+
+
+@pytest.fixture()
+def runner(stewart):
+    r = TwinRunner(stewart[0])
+    r.start(warmup=False)
+    return r
+
+
+def test_trajectory_without_joint_names_is_rejected(runner):
+    r = apply_message(runner, "joint_trajectory", "/flexmb_twin/joint_trajectory", _traj_msg([], [(0.0, [], [])]))
+    assert r.kind == C.SIZE
+    assert str(r).startswith("/flexmb_twin/joint_trajectory: rejected (size): no joint_names; expected the names")
+
+
+def test_non_finite_trajectory_velocities_are_rejected(runner):
+    L = list(runner.sample().actuator_commands[:2])
+    pts = [(0.1, L, [0.0, 0.0]), (0.2, L, [math.nan, 0.0])]
+    r = apply_message(runner, "joint_trajectory", "/j", _traj_msg(["leg1", "leg2"], pts))
+    assert r.kind == C.NOT_FINITE
+    assert r.detail == "point 1: velocities must be finite, got [leg1=nan]"
+    pts = [(0.1, L, [math.inf, 0.0]), (0.2, L, [0.0, 0.0])]
+    assert apply_message(runner, "joint_trajectory", "/j", _traj_msg(["leg1", "leg2"], pts)).kind == C.NOT_FINITE
+
+
+def test_negative_stamp_is_rejected(runner):
+    L = list(runner.sample().actuator_commands)
+    msg = {"header": {"stamp": {"sec": -3, "nanosec": 0}}, "names": list(runner.model.actuators.names),
+           "lengths": L, "velocities": []}
+    r = apply_message(runner, "actuator_commands", "/flexmb_twin/actuator_commands", msg)
+    assert r.kind == C.BAD_STAMP
+    assert r.detail == ("header stamp -3 s is negative; expected the time the command is meant for on the "
+                        "twin's /clock (≥ 0), or 0 for 'now'")
+    r = apply_message(runner, "joint_trajectory", "/j", _traj_msg(["leg1"], [(0.1, L[:1], [])], sec=-3))
+    assert r.kind == C.BAD_STAMP
+
+
+def test_absurd_rates_are_rejected_against_the_limit(runner):
+    L = list(runner.sample().actuator_commands)
+    r = runner.command_named("/a", ["leg1", "leg2"], L[:2], [1e308, 0.0])
+    assert r.kind == C.RATE
+    assert r.detail == ("rates beyond the actuator rate limit (the servo's max_rate where declared, else the "
+                        "max_command_rate parameter): [leg1=1e+308 m/s (limit 10 m/s)]")
+    pts = [(0.1, L[:1], [0.0]), (0.2, L[:1], [-20.0])]
+    r = runner.command_trajectory("/j", ["leg1"], 0.0, pts)
+    assert r.kind == C.RATE and r.detail.startswith("point 1: rates beyond") and "leg1=-20 m/s" in r.detail
+    assert runner.command_named("/a", ["leg1"], L[:1], [0.5]) is None
+
+
+def test_trajectory_point_limit(stewart):
+    model, _ = stewart
+    runner = TwinRunner(model, options=RunnerOptions(max_trajectory_points=100))
+    runner.start(warmup=False)
+    L = float(runner.sample().actuator_commands[0])
+    pts = [(0.001 * (k + 1), [L], []) for k in range(101)]
+    r = apply_message(runner, "joint_trajectory", "/j", _traj_msg(["leg1"], pts))
+    assert r.kind == C.TOO_LARGE
+    assert str(r) == "/j: rejected (too_large): 101 trajectory points; the limit is 100 (parameter max_trajectory_points)"
+    assert apply_message(runner, "joint_trajectory", "/j", _traj_msg(["leg1"], pts[:100])) is None
+
+
+def test_a_ten_thousand_point_trajectory_is_validated_and_followed(runner):
+    L = float(runner.sample().actuator_commands[0])
+    n = 10_000
+    pts = [(1e-4 * (k + 1), [L + 1e-3 * math.sin(k / 500)], [1e-3 / 500 * math.cos(k / 500) / 1e-4])
+           for k in range(n)]
+    assert runner.command_trajectory("/j", ["leg1"], 0.0, pts) is None
+    tr = runner.schedule.trajectory
+    assert tr.times.size == n + 1 and tr.rates is not None
+    bad = list(pts)
+    bad[9000] = (bad[9000][0], [5.0], [])
+    r = runner.command_trajectory("/j", ["leg1"], 0.0, bad)
+    assert r.kind == C.STROKE and r.detail.startswith("point 9000: lengths outside the actuator stroke: leg1=5 m")
+
+
+def test_rejection_excerpts_are_bounded(runner):
+    r = runner.command_array("/c", list(range(100_000)))
+    assert r.kind == C.SIZE and len(str(r)) < 300 and "(100000 in all)" in str(r)
+    r = runner.command_named("/a", ["x" * 10_000] * 3, [1.0] * 3, [])
+    assert r.kind == C.UNKNOWN_NAME and len(str(r)) < 400
+
+
+# --- player -----------------------------------------------------------------------------------
+def test_table_lookup_equals_np_interp_bit_for_bit():
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 20_001))
+    v = rng.normal(size=(t.size, 6))
+    look = TableLookup(t, v)
+    queries = np.concatenate([np.linspace(t[0] - 1, t[-1] + 1, 30_000), rng.uniform(t[0], t[-1], 2000),
+                              t[:50], t[-50:], [t[10], t[5], t[20_000], t[0]]])
+    for q in queries:
+        ref = np.array([np.interp(q, t, v[:, i]) for i in range(6)])
+        np.testing.assert_array_equal(look(q), ref)
+
+
+def test_csv_source_uses_the_lookup(tmp_path):
+    t = np.arange(0.0, 20.0, 1e-3)
+    data = np.column_stack([t, 1.0 + 0.01 * np.sin(t), 1.0 + 0.01 * np.cos(t)])
+    path = tmp_path / "cmd.csv"
+    np.savetxt(path, data, delimiter=",", header="t,a,b")
+    src = CommandSource.from_csv(str(path), ["a", "b"])
+    for q in (0.0, 3.2105, 3.2115, 19.9985, 25.0):
+        L, _ = src.at(q)
+        np.testing.assert_array_equal(L, [np.interp(q, t, data[:, 1]), np.interp(q, t, data[:, 2])])
