@@ -15,10 +15,34 @@ from .model.workspace import State, Workspace
 from .scene.schema import Output
 
 
+@njit(cache=True)
+def _actuator_kinematics(q, v, end_ydofs, lengths, rates):
+    """End-to-end length (m) and its rate (m/s) of every actuator, into ``lengths, rates (na,)``;
+    ``end_ydofs (na, 6)`` the ids of the two end positions."""
+    for i in range(end_ydofs.shape[0]):
+        s = 0.0
+        w = 0.0
+        for k in range(3):
+            d = q[end_ydofs[i, k + 3]] - q[end_ydofs[i, k]]
+            s += d * d
+            w += d * (v[end_ydofs[i, k + 3]] - v[end_ydofs[i, k]])
+        length = np.sqrt(s)
+        lengths[i] = length
+        rates[i] = w / length
+
+
+def actuator_kinematics(model: Model, q: np.ndarray, v: np.ndarray, lengths: np.ndarray,
+                        rates: np.ndarray) -> None:
+    """Length (m) and rate (m/s) of every actuator into ``lengths, rates (na,)`` (one call, no
+    temporaries: the node reports them at every step that answers a command)."""
+    _actuator_kinematics(q, v, model.actuators.end_ydofs, lengths, rates)
+
+
 def actuator_lengths(model: Model, q: np.ndarray) -> np.ndarray:
     """Current end-to-end length of every actuator (m), shape (na,)."""
-    e = model.actuators.end_ydofs
-    return np.linalg.norm(q[e[:, 3:]] - q[e[:, :3]], axis=1)
+    lengths = np.zeros(model.actuators.l0.size)
+    actuator_kinematics(model, q, np.zeros_like(q), lengths, np.zeros_like(lengths))
+    return lengths
 
 
 def actuator_forces(model: Model, ws: Workspace, state: State) -> np.ndarray:
@@ -125,10 +149,9 @@ def platform_pose(model: Model, q: np.ndarray, nodes: tuple[str, ...]) -> tuple[
 
 def actuator_velocities(model: Model, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rate of change of every actuator's end-to-end length (m/s), shape (na,)."""
-    e = model.actuators.end_ydofs
-    d = q[e[:, 3:]] - q[e[:, :3]]
-    dv = v[e[:, 3:]] - v[e[:, :3]]
-    return np.einsum("ij,ij->i", d, dv) / np.linalg.norm(d, axis=1)
+    rates = np.zeros(model.actuators.l0.size)
+    actuator_kinematics(model, q, v, np.zeros_like(rates), rates)
+    return rates
 
 
 def _section_frame(model: Model, q: np.ndarray, member: str, node: str) -> tuple[np.ndarray, np.ndarray]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .model.model import Model
-from .observers import PlatformObserver, actuator_forces, actuator_lengths, actuator_velocities, joint_angle
+from .observers import PlatformObserver, actuator_forces, actuator_kinematics, joint_angle
 from .simulator import Simulator
 
 # Step for the central difference that gives a joint angle's rate along the velocity field
@@ -134,9 +134,8 @@ class TwinReporter:
         q, v = st.q, st.v
         s.t = float(st.t)
         if s.actuator_names:
-            s.actuator_lengths[:] = actuator_lengths(model, q)
-            s.actuator_velocities[:] = actuator_velocities(model, q, v)
-            s.actuator_commands[:] = st.lam * model.actuators.l0
+            actuator_kinematics(model, q, v, s.actuator_lengths, s.actuator_velocities)
+            np.multiply(st.lam, model.actuators.l0, out=s.actuator_commands)
             s.actuator_forces[:] = actuator_forces(model, sim.ws, st)
         for k, o in enumerate(self._joints):
             s.joint_positions[k] = joint_angle(model, q, o.node, o.nodes)

@@ -114,6 +114,7 @@ class LiveMessages:
         _set_stamp(m.command_stamp, timing.command_stamp)
         m.command_latency = float(timing.command_latency)
         m.rejected_commands = int(timing.rejected_commands)
+        m.command_age = float(timing.command_age)
         return m
 
     def make_shape(self, s: TwinSample, member_kinds, shells: ShellShapes | None = None) -> None:

@@ -124,8 +124,9 @@ class StatusTiming:
     unconverged_steps: int = 0
     real_time_factor: float = 0.0
     command_stamp: float = 0.0        # s, header stamp of the newest command used
-    command_latency: float = 0.0      # s
+    command_latency: float = 0.0      # s, reception of the newest command → first state using it
     rejected_commands: int = 0
+    command_age: float = 0.0          # s, wall time since the newest accepted command arrived
     message: str = ""                 # overrides the solver's message when set
 
 
@@ -140,7 +141,7 @@ def status(s: TwinSample, timing: StatusTiming) -> dict:
             "real_time_factor": float(timing.real_time_factor), "sim_time": float(s.t),
             "substeps": int(s.substeps), "message": timing.message or s.message,
             "command_stamp": stamp(timing.command_stamp), "command_latency": float(timing.command_latency),
-            "rejected_commands": int(timing.rejected_commands)}
+            "rejected_commands": int(timing.rejected_commands), "command_age": float(timing.command_age)}
 
 
 def clock(t: float) -> dict:

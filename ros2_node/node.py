@@ -2,30 +2,43 @@
 
 Commands in (``~/commands``, ``~/actuator_commands``, ``~/joint_trajectory``), the flexible
 mechanism out (``/joint_states``, ``~/actuator_states``, ``~/platform_pose``, ``~/shape``,
-``~/status``, ``/clock``); names and types in :mod:`ros2_node.topics`. The solver lives in a
-:class:`~ros2_node.twin.TwinRunner`; this module only moves messages and keeps time.
+``~/status``, ``/clock``, ``/diagnostics``); names and types in :mod:`ros2_node.topics`.
 
-Timing. ``realtime``: step k must finish by ``t_start + k Δt`` on the wall clock; the loop sleeps
-in the executor until then, so commands are taken as they arrive, and every late step counts as
-a deadline miss. ``lockstep``: one step per received command message, deterministic, so a lockstep
-run equals an offline replay of its commands (:mod:`ros2_node.bag`). Warm-up (numba compile or
-cache load) happens before the first step, outside the timed loop.
+Three threads, so that the time loop never waits for the interpreter's other work:
+
+- the **stepping thread** (:class:`~ros2_node.realtime.Stepper`) applies the commands, runs the
+  numba step (GIL released) paced to absolute deadlines, and copies the state into a ring of
+  preallocated snapshots;
+- the **executor** (the main thread, rclpy's C++ ``EventsExecutor``) only hands received command
+  messages to the stepping thread;
+- the **publisher thread** turns due snapshots into messages, built once per publication (decimated
+  by ``publish_rate``), publishes and records them, and reports health: ``~/status``,
+  ``/diagnostics`` and a throttled warning when the twin falls behind the wall clock.
+
+Timing. ``realtime``: the step to state n+1 must end by ``t_start + (n+1) Δt``; a waiting command
+starts its step at once, otherwise a step starts ``step_margin`` before its deadline (see
+:mod:`ros2_node.realtime`). ``lockstep``: one step per received command message, deterministic, so
+a lockstep run equals an offline replay of its commands (:mod:`ros2_node.bag`). Warm-up (numba
+compile or cache load) happens before the first step, outside the timed loop.
 """
 
 from __future__ import annotations
 
 import collections
 import dataclasses
+import gc
 import json
 import math
 import signal
+import sys
+import threading
 import time
 from pathlib import Path
 
-import numpy as np
-
 from flexmb_core.errors import FlexmbError
 from flexmb_core.model.compile import compile_scene
+from flexmb_core.model.workspace import Workspace
+from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
 
 from . import messages as M
@@ -33,37 +46,19 @@ from . import topics as T
 from .convert import message_class, to_dict
 from .live_messages import LiveMessages
 from .params import SPECS, NodeParams
-from .twin import RunnerOptions, TwinRunner, apply_message
+from .realtime import Samples, Snapshot, Stepper, StepperConfig
+from .shells import ShellShapes
+from .twin import RunnerOptions, TwinRunner
 
-# s before a realtime deadline at which the loop stops sleeping and polls
-_WAKE_MARGIN = 4.0e-4
+# s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
+_SWITCH_INTERVAL = 5.0e-5
 # s of wall time between two status messages of an idle lockstep twin
 _HEARTBEAT = 0.2
+# s of wall time between two looks at which output topics have subscribers
+_LISTENER_PERIOD = 0.5
 
 # topic kind → (topic, what apply_message calls it)
 _INPUTS = ((T.COMMANDS, "commands"), (T.ACTUATOR_COMMANDS, "actuator_commands"), (T.TRAJECTORY, "joint_trajectory"))
-
-
-class _Samples:
-    """The newest ``capacity`` values of a per-step quantity, in a buffer allocated once (a node runs
-    for hours: a growing list would allocate at every step), and the count and sum of all of them."""
-
-    def __init__(self, capacity: int = 1 << 19):
-        self._buf = np.empty(capacity)
-        self.count = 0
-        self.total = 0.0
-
-    def add(self, x: float) -> None:
-        self._buf[self.count % self._buf.size] = x
-        self.count += 1
-        self.total += x
-
-    def percentiles(self, qs=(50, 99), sign: float = 1.0) -> dict:
-        """Percentiles of ``sign`` × the values in the window, its max, and how many values it holds."""
-        a = sign * self._buf[:min(self.count, self._buf.size)]
-        if not a.size:
-            return {f"p{q}": 0.0 for q in qs} | {"max": 0.0, "count": 0}
-        return {f"p{q}": float(np.percentile(a, q)) for q in qs} | {"max": float(a.max()), "count": int(a.size)}
 
 
 class TwinNode:
@@ -112,9 +107,7 @@ class TwinNode:
         self.scene_path = self.p.scene
         scene = load_scene(self.p.scene, overrides)
         self.model = compile_scene(scene)
-        options = RunnerOptions(command_source=self.p.command_source, command_timeout=self.p.command_timeout,
-                                timeout_behaviour=self.p.command_timeout_behaviour, ramp_time=self.p.ramp_time,
-                                stale_after=self.p.stale_after, max_lead=self.p.max_lead)
+        options = RunnerOptions.from_params(self.p)
         self.runner = TwinRunner(self.model, options=options)
         t0 = time.perf_counter()
         self.runner.start()
@@ -139,6 +132,9 @@ class TwinNode:
             pass                    # no tf2_msgs here (PyPI): /tf goes to recordings only
         for topic in outputs:
             self._pub[topic.name] = self.node.create_publisher(message_class(topic.type), topic.resolved(n), qos)
+        self._diag = None
+        if self.p.diagnostics_rate > 0:
+            self._diag = Diagnostics(self.node, qos, n)
         self.live = LiveMessages(self.runner.sample())
         self._subs = []
         if self.runner.schedule is not None:
@@ -146,7 +142,7 @@ class TwinNode:
                 cb = (lambda msg, _t=topic, _k=kind: self._on_command(_t, _k, msg))
                 self._subs.append(self.node.create_subscription(message_class(topic.type), topic.resolved(n), cb, qos))
 
-        # -- executor: the C++ events executor keeps 1 kHz; the default one as fallback -------------
+        # -- executor: the C++ events executor, which only moves command messages in ---------------
         try:
             from rclpy.experimental import EventsExecutor
             self.executor = EventsExecutor(context=context)
@@ -176,28 +172,39 @@ class TwinNode:
             self.rerun = TwinRerunLogger(self.model, rrd_path=self.p.rrd)
             self.rerun.log_static()
 
-        # -- counters -----------------------------------------------------------------------------
-        self.steps_advanced = 0
-        self.deadline_misses = 0
-        self.overruns = 0
-        self._pending_steps = 0
-        self._callbacks = 0
-        self._new_command = False
-        self._cmd_recv_wall = 0.0
-        self._last_command_wall = None
-        self._step_walls = _Samples()
-        self._lateness = _Samples()               # realtime: step end − its deadline (s; > 0 = missed)
-        self._latencies = _Samples()
-        self._rtf_window = collections.deque(maxlen=1024)
-        self._last_step_wall = 0.0
-        self._published = 0
-        self._warned: dict[str, float] = {}
-        self._publish_every = 1
-        self._shape_every = 0
+        # -- the publisher's own view of the state: a reporter and a workspace of its own, so it
+        #    never touches the buffers the stepping thread is using -----------------------------------
+        self._reporter = TwinReporter(self.model)
+        self._view = _SnapshotView(self.model, Workspace(self.model))
+        self._view.last = self.runner.sim.last
+        self._shells = ShellShapes(self.model)
+        self._member_kinds = self.runner.member_kinds
+
+        # -- the stepping thread ----------------------------------------------------------------------
+        self.stepper = Stepper(self.runner, StepperConfig(
+            mode=self.p.mode, publish_on_command=self.p.publish_on_command, max_lag=self.p.max_lag,
+            margin=self.p.step_margin, duration=self.p.duration, cpu_affinity=_cpus(self.p.cpu_affinity),
+            rt_priority=self.p.rt_priority, window=max(1, int(round(1.0 / self.dt)))), self._wake_publisher)
         self._set_rates()
+
+        # -- counters (publisher thread) ------------------------------------------------------------
+        self._callbacks = 0
+        self._out_event = threading.Event()
+        self._last_command_wall = None          # executor: newest message received
+        self._accepted_wall = 0.0               # newest accepted command's reception (publisher)
+        self._latency = 0.0                     # its command→state latency, once answered
+        self._latencies = Samples()
+        self._rtf_window = collections.deque(maxlen=1024)
+        self._published = 0
+        self._listened: dict[str, bool] = {}      # topic → has subscribers (unknown: publish)
+        self._warned: dict[str, float] = {}
+        self._behind_message = ""
+        self._last_sample = None
         self.wall_start = 0.0
         self.wall_stop = 0.0
+        self._cpu_start = 0.0
         self.stop_requested = False
+        self.interrupted = False
         self.log.info(f"scene '{self.model.scene.name}': {self.model.ndof} DOFs, {self.model.actuators.l0.size} "
                       f"actuators, Δt = {self.dt:g} s, mode {self.p.mode}, warm-up {self.warmup_s:.2f} s; "
                       f"commands on {T.COMMANDS.resolved(n)}, {T.ACTUATOR_COMMANDS.resolved(n)}, "
@@ -205,8 +212,10 @@ class TwinNode:
 
     # -- parameters that may change at run time ----------------------------------------------------
     def _set_rates(self) -> None:
-        self._publish_every = max(1, int(round(1.0 / (self.p.publish_rate * self.dt))))
-        self._shape_every = 0 if self.p.shape_rate <= 0 else max(1, int(round(1.0 / (self.p.shape_rate * self.dt))))
+        cfg = self.stepper.cfg
+        cfg.publish_every = max(1, int(round(1.0 / (self.p.publish_rate * self.dt))))
+        cfg.shape_every = 0 if self.p.shape_rate <= 0 else max(1, int(round(1.0 / (self.p.shape_rate * self.dt))))
+        cfg.publish_on_command = self.p.publish_on_command
 
     def _on_set_parameters(self, params):
         from rcl_interfaces.msg import SetParametersResult
@@ -217,10 +226,11 @@ class TwinNode:
                 setattr(self.p, prm.name, check(prm.name, prm.value))
         except FlexmbError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._set_rates()
+        if hasattr(self, "stepper"):
+            self._set_rates()
         return SetParametersResult(successful=True)
 
-    # -- inputs ---------------------------------------------------------------------------------------
+    # -- inputs (executor thread): hand the message to the stepping thread ------------------------------
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
         if now - self._warned.get(key, -math.inf) >= self.p.log_throttle:
@@ -230,52 +240,24 @@ class TwinNode:
     def _on_command(self, topic: T.Topic, kind: str, msg) -> None:
         t_recv = time.perf_counter()
         self._callbacks += 1
-        name = topic.resolved(self.node_name)
-        d = to_dict(msg) if self.recorder is not None else msg
-        if self.recorder is not None:
-            self.recorder.write(name, topic.type, d, self.runner.t)
-        try:
-            rejection = apply_message(self.runner, kind, name, d)
-        except (FlexmbError, ValueError, TypeError, KeyError) as exc:
-            self._warn(f"{name}:error", f"{name}: rejected: {exc}")
-            rejection = True
-        if rejection is not None:
-            if rejection is not True:
-                self._warn(f"{name}:{rejection.kind}", str(rejection))
-        else:
-            self._new_command = True
-            self._cmd_recv_wall = t_recv
         self._last_command_wall = t_recv
-        if self.p.mode == "lockstep":
-            self._pending_steps += 1
+        d = to_dict(msg) if self.recorder is not None else msg
+        self.stepper.submit(topic.resolved(self.node_name), kind, d, t_recv, topic)
 
-    def _drain(self) -> None:
-        """Run the callbacks of every message already waiting (bounded)."""
-        for _ in range(32):
-            before = self._callbacks
-            self.executor.spin_once(timeout_sec=0.0)
-            if self._callbacks == before:
-                return
+    # -- outputs (publisher thread) ------------------------------------------------------------------------
+    def _wake_publisher(self) -> None:
+        self._out_event.set()
 
-    # -- outputs --------------------------------------------------------------------------------------
-    def _out(self, topic: T.Topic, msg, make_dict, t: float) -> None:
-        """Publish ``msg`` (filled by :class:`LiveMessages`) and record ``make_dict()`` (the same
-        content, from :mod:`ros2_node.messages`)."""
+    def _out(self, topic: T.Topic, fill, make_dict, t: float) -> None:
+        """Publish ``fill()`` (a message filled by :class:`LiveMessages`, or None) when the topic has
+        subscribers, and record ``make_dict()`` (the same content, from :mod:`ros2_node.messages`)."""
         pub = self._pub.get(topic.name)
-        if pub is not None and msg is not None:
-            pub.publish(msg)
+        if pub is not None and self._listened.get(topic.name, True):
+            msg = fill()
+            if msg is not None:
+                pub.publish(msg)
         if self.recorder is not None:
             self.recorder.write(topic.resolved(self.node_name), topic.type, make_dict(), t)
-
-    def _timing(self, outcome_message: str) -> M.StatusTiming:
-        c = self.runner.counters
-        latency = (time.perf_counter() - self._cmd_recv_wall) if self._cmd_recv_wall else 0.0
-        return M.StatusTiming(step_wall_time=self._last_step_wall, steps=c.steps,
-                              deadline_misses=self.deadline_misses,
-                              unconverged_steps=c.failed_steps + c.flagged_steps,
-                              real_time_factor=self._rtf(), command_stamp=self.runner.newest_command_stamp,
-                              command_latency=latency, rejected_commands=self.runner.rejected_commands,
-                              message=outcome_message)
 
     def _rtf(self) -> float:
         w = self._rtf_window
@@ -283,154 +265,260 @@ class TwinNode:
             return 0.0
         return (w[-1][1] - w[0][1]) / (w[-1][0] - w[0][0])
 
-    def _publish(self, outcome_message: str, advanced: bool) -> None:
-        k = self.steps_advanced
-        on_command = self.p.publish_on_command and self._new_command and advanced
-        due = k % self._publish_every == 0 or not advanced
-        # lockstep: every step answers one command, and its status is the acknowledgement
-        ack = self.p.mode == "lockstep"
-        shape_due = self._shape_every and k % self._shape_every == 0
-        if not (due or on_command or shape_due or ack):
-            return
-        s = self.runner.sample(full=bool(due or shape_due))
+    def _timing(self, snap: Snapshot, outcome_message: str) -> M.StatusTiming:
+        now = time.perf_counter()
+        age = (now - self._accepted_wall) if self._accepted_wall else 0.0
+        st = self.stepper.stats
+        return M.StatusTiming(step_wall_time=snap.step_wall, steps=snap.steps,
+                              deadline_misses=st.deadline_misses,
+                              unconverged_steps=snap.failed_steps + snap.flagged_steps,
+                              real_time_factor=self._rtf(), command_stamp=snap.newest_stamp,
+                              command_latency=self._latency, command_age=age, rejected_commands=snap.rejected,
+                              message=outcome_message or self._behind_message)
+
+    def _on_command_event(self, topic_name: str, kind: str, d, t_applied: float, rejection,
+                          recv_wall: float, topic: T.Topic) -> None:
+        """A command the stepping thread applied at simulated time ``t_applied``: record it with
+        that log time (what a replay re-applies before the same step) and warn of a rejection."""
+        if self.recorder is not None:
+            self.recorder.write(topic_name, topic.type, d, t_applied)
+        if rejection is None:
+            self._accepted_wall = recv_wall
+        elif isinstance(rejection, str):
+            self._warn(f"{topic_name}:error", rejection)
+        else:
+            self._warn(f"{topic_name}:{rejection.kind}", str(rejection))
+
+    def _publish(self, snap: Snapshot) -> None:
+        view = self._view
+        view.state, view.last = snap.state, snap.result if snap.result is not None else view.last
+        full = bool(snap.due or snap.shape_due)
+        s = self._reporter.read(view, full)
+        if full:
+            self._shells.read(snap.state.q)
         t = s.t
+        self._rtf_window.append((snap.end_wall, t))
         if not s.is_finite():       # never publish NaN (the runner rolls such steps back already)
             self._warn("nan", f"non-finite output at t = {t:.6g} s withheld")
             return
         live = self.live
-        if due or on_command:
-            self._out(T.JOINT_STATES, live.fill_joint_state(s), lambda: M.joint_state(s), t)
-            if on_command:
-                self._latencies.add(time.perf_counter() - self._cmd_recv_wall)
-                self._new_command = False
-        if due or on_command or ack:
-            timing = self._timing(outcome_message)
-            self._out(T.STATUS, live.fill_status(s, timing), lambda: M.status(s, timing), t)
-        if due:
-            self._out(T.ACTUATOR_STATES, live.fill_actuator_state(s), lambda: M.actuator_state(s), t)
+        message = snap.message
+        if snap.due or snap.on_command:
+            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s), t)
+            if snap.on_command:
+                self._latency = time.perf_counter() - snap.cmd_recv_wall
+                self._latencies.add(self._latency)
+        if snap.due or snap.on_command or snap.ack:
+            timing = self._timing(snap, message)
+            self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing), t)
+        if snap.due:
+            self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s), t)
             for i, topic in enumerate(self._pose_topics):
-                self._out(topic, live.fill_pose(s, i), lambda i=i: M.platform_pose(s, i), t)
+                self._out(topic, lambda i=i: live.fill_pose(s, i), lambda i=i: M.platform_pose(s, i), t)
             if self._pose_topics:
-                self._out(T.TF, live.fill_tf(s) if live.tf_msg is not None else None, lambda: M.tf(s), t)
+                self._out(T.TF, lambda: live.fill_tf(s) if live.tf_msg is not None else None, lambda: M.tf(s), t)
             if self.p.publish_clock:
-                self._out(T.CLOCK, live.fill_clock(t), lambda: M.clock(t), t)
+                self._out(T.CLOCK, lambda: live.fill_clock(t), lambda: M.clock(t), t)
             self._published += 1
-        if shape_due:
-            kinds, shells = self.runner.member_kinds, self.runner.shells
-            self._out(T.SHAPE, live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells), t)
+        if snap.shape_due:
+            kinds, shells = self._member_kinds, self._shells
+            self._out(T.SHAPE, lambda: live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells), t)
             if self.rerun is not None:
-                self.rerun.log_sample(s, {"step_wall_time": self._last_step_wall, "real_time_factor": self._rtf(),
-                                          "message": outcome_message}, shells)
+                self.rerun.log_sample(s, {"step_wall_time": snap.step_wall, "real_time_factor": self._rtf(),
+                                          "message": message}, shells)
+        if not snap.advanced and message:
+            self._warn("step", message)
+        self._last_sample = snap
 
-    # -- stepping -------------------------------------------------------------------------------------
-    def _step(self) -> None:
-        a = time.perf_counter()
-        outcome = self.runner.step()
-        b = time.perf_counter()
-        self._last_step_wall = b - a
-        self._step_walls.add(self._last_step_wall)
-        if outcome.advanced:
-            self.steps_advanced += 1
-        else:
-            self._warn("step", outcome.message)
-        self._rtf_window.append((b, self.runner.t))
-        self._publish(outcome.message if not outcome.converged or outcome.message else "", outcome.advanced)
+    def _refresh_listeners(self) -> None:
+        """Which output topics have subscribers: a message nobody takes is neither filled nor
+        published (serializing it costs as much as the solver step). Asked twice a second."""
+        self._listened = {name: pub.get_subscription_count() > 0 for name, pub in self._pub.items()}
 
+    def _drain_outbox(self) -> int:
+        """Publish and record every queued event in order; returns how many were handled."""
+        out = self.stepper.outbox
+        slots = self.stepper.slots
+        k = 0
+        while out:
+            ev = out.popleft()
+            k += 1
+            if ev[0] == "cmd":
+                self._on_command_event(*ev[1:])
+                continue
+            snap = slots[ev[1]]
+            if snap.seq != ev[2]:
+                # the stepping thread lapped the ring: this publication was overwritten
+                self.stepper.stats.dropped_snapshots += 1
+                continue
+            self._publish(snap)
+        return k
+
+    def _check_health(self) -> None:
+        """The throttled 'behind' warning and the reason in ``status.message``."""
+        st = self.stepper.stats
+        msg = ""
+        if st.recent_misses:
+            window = min(self.stepper.cfg.window, self.runner.counters.steps)
+            msg = (f"behind real time: {st.recent_misses} of the last {window} steps missed their "
+                   f"deadline ({st.deadline_misses} in total, {st.overruns} re-anchored); step wall time p99 "
+                   f"{1e3 * self.stepper.step_walls.percentiles((99,))['p99']:.3f} ms for Δt = {1e3 * self.dt:g} ms")
+        if st.dropped_snapshots:
+            msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_snapshots} publications "
+                                                 "dropped")
+        if msg:
+            self._warn("behind", msg)
+        self._behind_message = msg
+
+    def _publisher_main(self) -> None:
+        """The publisher thread: publish what the stepping thread queues, report health."""
+        period = 1.0 / self.p.diagnostics_rate if self.p.diagnostics_rate > 0 else math.inf
+        next_diag = time.perf_counter() + period
+        last_beat = time.perf_counter()
+        next_listeners = last_beat
+        try:
+            while True:
+                self._out_event.wait(0.05)
+                self._out_event.clear()
+                handled = self._drain_outbox()
+                now = time.perf_counter()
+                if handled:
+                    last_beat = now
+                if now >= next_listeners:
+                    next_listeners = now + _LISTENER_PERIOD
+                    self._refresh_listeners()
+                if now >= next_diag:
+                    next_diag = now + period
+                    self._check_health()
+                    if self._diag is not None:
+                        self._diag.publish(self)
+                if self.p.mode == "lockstep" and now - last_beat > _HEARTBEAT:
+                    last_beat = now
+                    self._heartbeat()
+                if self.stepper.finished.is_set() and not self.stepper.outbox:
+                    return
+        except Exception as exc:           # reported and stops the node; never a silent dead thread
+            self.publisher_error = exc
+            self.stop_requested = True
+
+    publisher_error: BaseException | None = None
+
+    def _heartbeat(self) -> None:
+        """Idle lockstep twin: repeat the status so that late joiners see the twin and its time."""
+        snap = self._last_sample
+        if snap is None:
+            return
+        view = self._view
+        view.state = snap.state
+        s = self._reporter.read(view, False)
+        timing = self._timing(snap, "")
+        self._out(T.STATUS, lambda: self.live.fill_status(s, timing), lambda: M.status(s, timing), s.t)
+        if self.p.publish_clock:
+            self._out(T.CLOCK, lambda: self.live.fill_clock(s.t), lambda: M.clock(s.t), s.t)
+
+    def _prime(self) -> None:
+        """Fill every output message once from the initial state (nothing is published or recorded):
+        the first publication then neither builds the shape's markers nor loads a kernel while the
+        stepping thread runs."""
+        view = self._view
+        view.state = self.runner.sim.state
+        s = self._reporter.read(view, True)
+        self._shells.read(view.state.q)
+        live, timing = self.live, M.StatusTiming()
+        live.fill_joint_state(s)
+        live.fill_status(s, timing)
+        live.fill_actuator_state(s)
+        for i in range(len(self._pose_topics)):
+            live.fill_pose(s, i)
+        if live.tf_msg is not None:
+            live.fill_tf(s)
+        live.fill_clock(s.t)
+        if self.stepper.cfg.shape_every:
+            live.fill_shape(s, self._member_kinds, self._shells)
+
+    # -- running ------------------------------------------------------------------------------------------
     def request_stop(self, *_args) -> None:
         """SIGINT/SIGTERM: finish the current step, then close the recording and write the summary."""
         self.stop_requested = True
 
     def _done(self) -> bool:
-        if self.stop_requested or not self.context.ok():
+        if self.stop_requested or not self.context.ok() or self.stepper.finished.is_set():
             return True
-        return self.p.duration > 0 and self.runner.t >= self.p.duration - 0.5 * self.dt
+        if (self.p.mode == "lockstep" and self.p.idle_timeout > 0 and self._last_command_wall is not None
+                and time.perf_counter() - self._last_command_wall > self.p.idle_timeout):
+            self.log.info(f"no command for {self.p.idle_timeout} s: stopping")
+            return True
+        return False
 
     def spin(self) -> dict:
         """Run until ``duration`` or shutdown (SIGINT/SIGTERM); returns the summary."""
         from rclpy.executors import ExternalShutdownException
 
+        self._prime()
+        # Everything allocated so far lives as long as the node: keep the cyclic collector off it,
+        # so that no collection of the whole heap stalls a thread mid-run.
+        gc.collect()
+        gc.freeze()
+        # The stepping thread needs the GIL for the few Python lines around its numba call: let
+        # another thread keep it at most this long (default 5 ms, five steps at 1 kHz).
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(_SWITCH_INTERVAL)
+        publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
         self.wall_start = time.perf_counter()
+        self._cpu_start = time.process_time()
         try:
-            # publish the initial state once, so subscribers see the twin before the first command
-            self._publish("", False)
-            if self.p.mode == "lockstep":
-                self._spin_lockstep()
-            else:
-                self._spin_realtime()
+            self.stepper.start()
+            publisher.start()
+            for w in self.stepper.warnings:
+                self.log.warning(w)
+            while not self._done():
+                self.executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+            self.stop_requested = True
         finally:
+            self.interrupted = self.stop_requested or not self.context.ok()
+            self.stepper.stop()
             self.wall_stop = time.perf_counter()
+            publisher.join(10.0)
+            self._drain_outbox()            # anything the publisher had not reached (it stopped)
+            sys.setswitchinterval(switch)
+            gc.unfreeze()
             summary = self.summary()
             self.close()
+        for what, err in (("stepping", self.stepper.error), ("publisher", self.publisher_error)):
+            if err is not None:
+                raise FlexmbError(f"the {what} thread stopped: {type(err).__name__}: {err}") from err
         return summary
-
-    def _spin_realtime(self) -> None:
-        dt = self.dt
-        t0 = time.perf_counter()
-        k = 0
-        while not self._done():
-            self._drain()
-            self._step()
-            k += 1
-            deadline = t0 + k * dt
-            end = time.perf_counter()
-            self._lateness.add(end - deadline)
-            if end > deadline:
-                self.deadline_misses += 1
-                if end - deadline > self.p.max_lag:   # far behind: re-anchor instead of bursting
-                    self.overruns += 1
-                    t0 = end - k * dt
-                    continue
-            # Sleep in the executor (commands are taken as they come) until shortly before the
-            # deadline, then poll: the executor's timed wait wakes up to ~0.5 ms late.
-            while True:
-                rem = deadline - time.perf_counter()
-                if rem <= 0.0 or not self.context.ok():
-                    break
-                self.executor.spin_once(timeout_sec=rem - _WAKE_MARGIN if rem > _WAKE_MARGIN else 0.0)
-
-    def _spin_lockstep(self) -> None:
-        last_beat = time.perf_counter()
-        while not self._done():
-            if self._pending_steps == 0:
-                self.executor.spin_once(timeout_sec=0.05)
-                if time.perf_counter() - last_beat > _HEARTBEAT:
-                    # idle: repeat the status so that late joiners see the twin and its time
-                    last_beat = time.perf_counter()
-                    s = self.runner.sample()
-                    timing = self._timing("")
-                    self._out(T.STATUS, self.live.fill_status(s, timing), lambda: M.status(s, timing), s.t)
-                    if self.p.publish_clock:
-                        self._out(T.CLOCK, self.live.fill_clock(s.t), lambda: M.clock(s.t), s.t)
-                if (self.p.idle_timeout > 0 and self._last_command_wall is not None
-                        and time.perf_counter() - self._last_command_wall > self.p.idle_timeout):
-                    self.log.info(f"no command for {self.p.idle_timeout} s: stopping")
-                    return
-                continue
-            self._pending_steps -= 1
-            self._step()
-            last_beat = time.perf_counter()
 
     # -- end ------------------------------------------------------------------------------------------
     def summary(self) -> dict:
         c = self.runner.counters
+        st = self.stepper.stats
         wall = max(self.wall_stop - self.wall_start, 1e-12)
-        steps_wall = self._step_walls.total
+        steps_wall = self.stepper.step_walls.total
         return {
             "scene": self.model.scene.name, "scene_file": str(self.scene_path), "mode": self.p.mode, "dt": self.dt,
-            "node_name": self.node_name, "steps": c.steps, "steps_advanced": self.steps_advanced,
+            "node_name": self.node_name, "steps": c.steps, "steps_advanced": st.steps_advanced,
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
-            "jit_warmup_s": self.warmup_s, "deadline_misses": self.deadline_misses, "overruns": self.overruns,
-            "step_wall_time_s": self._step_walls.percentiles(),
-            "deadline_slack_s": self._lateness.percentiles((1, 50), sign=-1.0),
+            "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
+            "dropped_publications": st.dropped_snapshots,
+            "step_wall_time_s": self.stepper.step_walls.percentiles(),
+            "deadline_slack_s": self.stepper.lateness.percentiles((1, 50), sign=-1.0),
             "command_to_state_latency_s": self._latencies.percentiles(),
             "failed_steps": c.failed_steps, "flagged_steps": c.flagged_steps, "substepped_steps": c.substepped_steps,
             "commands_accepted": self.runner.schedule.accepted if self.runner.schedule else 0,
             "commands_rejected": dict(c.rejections), "published_states": self._published,
-            "record": self.p.record, "rrd": self.p.rrd,
+            "cpu_time_s": self._cpu_times(wall),
+            "record": self.p.record, "rrd": self.p.rrd, "interrupted": self.interrupted,
         }
+
+    def _cpu_times(self, wall: float) -> dict:
+        """CPU time of the node process over the run and of the solver's steps (s), and the
+        difference as a fraction of one core (what the node costs beyond the solver)."""
+        proc = time.process_time() - self._cpu_start
+        solver = self.stepper.step_walls.total
+        return {"process": proc, "solver_steps": solver, "beyond_solver_core_fraction": (proc - solver) / wall}
 
     def close(self) -> None:
         if self.recorder is not None:
@@ -444,6 +532,79 @@ class TwinNode:
         except Exception:
             pass
         self.node.destroy_node()
+
+
+class _SnapshotView:
+    """What :meth:`TwinReporter.read` reads of a :class:`Simulator`, over a snapshot's state (the
+    publisher's own workspace, so the stepping thread's buffers are never shared)."""
+
+    def __init__(self, model, ws):
+        self.model = model
+        self.ws = ws
+        self.state = None
+        self.last = None
+
+
+def _cpus(text: str) -> tuple[int, ...]:
+    """``cpu_affinity`` ("0,1" or "") as CPU ids."""
+    if not text.strip():
+        return ()
+    try:
+        cpus = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise FlexmbError(f"parameter 'cpu_affinity': expected comma-separated CPU ids such as '1' or '0,1', "
+                          f"got {text[:40]!r}") from None
+    if any(c < 0 for c in cpus):
+        raise FlexmbError(f"parameter 'cpu_affinity': CPU ids are ≥ 0, got {text[:40]!r}")
+    return cpus
+
+
+class Diagnostics:
+    """``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): solver health, deadlines, commands."""
+
+    def __init__(self, node, qos, node_name: str):
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        self._types = (DiagnosticArray, DiagnosticStatus, KeyValue)
+        self._pub = node.create_publisher(DiagnosticArray, T.DIAGNOSTICS.resolved(node_name), qos)
+        self._name = node_name
+
+    def publish(self, twin: "TwinNode") -> None:
+        DiagnosticArray, DiagnosticStatus, KeyValue = self._types
+        snap = twin._last_sample
+        st = twin.stepper.stats
+        c = twin.runner.counters
+        walls = twin.stepper.step_walls.percentiles((50, 99))
+        ok, warn, error = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+        def entry(what, level, message, values):
+            return DiagnosticStatus(level=level, name=f"{self._name}: {what}", message=message,
+                                    hardware_id=twin.model.scene.name,
+                                    values=[KeyValue(key=k, value=str(v)) for k, v in values])
+
+        res = snap.result if snap is not None else None
+        converged = bool(res.converged) if res is not None else True
+        failed = c.failed_steps + c.flagged_steps
+        solver = entry("solver", ok if converged and not failed else (warn if converged else error),
+                       "converged" if converged else (snap.message or "last step did not converge"),
+                       [("converged", converged), ("newton_iterations", getattr(res, "iterations", 0)),
+                        ("residual", getattr(res, "residual", 0.0)), ("steps", c.steps),
+                        ("failed_steps", c.failed_steps), ("flagged_steps", c.flagged_steps),
+                        ("substepped_steps", c.substepped_steps), ("sim_time", twin.runner.t)])
+        behind = st.recent_misses > 0 or st.dropped_snapshots > 0
+        timing = entry("deadlines", warn if behind else ok, twin._behind_message or "keeping real time",
+                       [("deadline_misses", st.deadline_misses), ("recent_misses", st.recent_misses),
+                        ("window_steps", twin.stepper.cfg.window), ("overruns", st.overruns),
+                        ("dropped_publications", st.dropped_snapshots), ("step_wall_p50_s", walls["p50"]),
+                        ("step_wall_p99_s", walls["p99"]), ("real_time_factor", twin._rtf()), ("dt", twin.dt)])
+        rej = dict(c.rejections)
+        cmds = entry("commands", warn if rej else ok, f"{sum(rej.values())} rejected" if rej else "all accepted",
+                     [("accepted", twin.runner.schedule.accepted if twin.runner.schedule else 0),
+                      ("latency_s", twin._latency)] + [(f"rejected_{k}", v) for k, v in sorted(rej.items())])
+        msg = DiagnosticArray(status=[solver, timing, cmds])
+        now = twin.node.get_clock().now().to_msg()
+        msg.header.stamp = now
+        self._pub.publish(msg)
 
 
 def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: list[str] | None = None) -> dict:

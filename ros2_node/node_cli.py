@@ -20,7 +20,10 @@ from . import topics as T
 
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
-               "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json")
+               "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
+               "step-margin", "cpu-affinity", "rt-priority", "diagnostics-rate")
+# exit code of a node stopped by SIGINT/SIGTERM (after closing its recording and writing its summary)
+INTERRUPTED = 130
 
 
 def _localhost_only() -> None:
@@ -42,7 +45,7 @@ def cmd_node(args: argparse.Namespace) -> int:
     summary = run_node(values, node_name=args.name, ros_args=args.ros_args)
     if not args.quiet:
         print(json.dumps(summary, indent=2))
-    return 0
+    return INTERRUPTED if summary.get("interrupted") else 0
 
 
 def cmd_play(args: argparse.Namespace) -> int:
@@ -88,6 +91,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--mcap", args.mcap]
     if args.rrd:
         node_cmd += ["--rrd", args.rrd]
+    if args.rt_priority:
+        node_cmd += ["--rt-priority", str(args.rt_priority)]
+    if args.cpu_affinity:
+        node_cmd += ["--cpu-affinity", args.cpu_affinity]
     play_cmd = exe + ["play", args.scene, "--mode", args.mode, "--until", str(args.until), "--json", str(player_json),
                       "--quiet", "--timeout", "120"]
     print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
@@ -114,7 +121,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
                 proc.wait(timeout=30)
-    if player.returncode != 0 or node.returncode != 0 or not node_json.exists() or not player_json.exists():
+    # the node is stopped by our SIGINT once the player is done: 130 is its normal end here
+    if player.returncode != 0 or node.returncode not in (0, INTERRUPTED) or not node_json.exists() \
+            or not player_json.exists():
         print(f"flexmb demo: node exit {node.returncode}, player exit {player.returncode}", file=sys.stderr)
         return 2
     n = json.loads(node_json.read_text())
@@ -126,9 +135,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"\n== flexmb demo: {n['scene']} ({n['mode']}, Δt = {n['dt'] * 1e3:g} ms) ==")
     print(f"  simulated {n['sim_time_s']:.3f} s in {n['wall_time_s']:.3f} s wall: RTF {n['rtf']:.3f} "
           f"(solver alone {n['solver_rtf']:.2f}); JIT warm-up {n['jit_warmup_s']:.2f} s")
-    print(f"  steps {n['steps']}, deadline misses {n['deadline_misses']} "
-          f"({100.0 * n['deadline_misses'] / max(n['steps'], 1):.2f} %), overruns {n['overruns']}, "
-          f"failed steps {n['failed_steps']}, rejected commands {sum(n['commands_rejected'].values())}")
+    misses = n["deadline_misses"]
+    if n["mode"] == "realtime":
+        print(f"  {misses} missed deadlines in {n['steps']} steps" + (
+            " — the twin kept real time" if misses == 0 else
+            f" ({100.0 * misses / max(n['steps'], 1):.2f} %) — MISSED DEADLINES: the twin fell behind the wall "
+            f"clock {misses} times ({n['overruns']} re-anchored); see the node's warnings above"))
+    print(f"  steps {n['steps']}, overruns {n['overruns']}, failed steps {n['failed_steps']}, "
+          f"rejected commands {sum(n['commands_rejected'].values())}, dropped publications "
+          f"{n.get('dropped_publications', 0)}")
+    cpu = n.get("cpu_time_s")
+    if cpu:
+        print(f"  node CPU {cpu['process']:.2f} s over {n['wall_time_s']:.2f} s, of which solver steps "
+              f"{cpu['solver_steps']:.2f} s: the node costs {100 * cpu['beyond_solver_core_fraction']:.1f} % of a "
+              "core beyond its solver")
     print(f"  step wall time p50 {_fmt_ms(sw['p50'])}, p99 {_fmt_ms(sw['p99'])}, max {_fmt_ms(sw['max'])}")
     print(f"  command → state latency (player, over DDS, {lat['count']} commands): p50 {_fmt_ms(lat['p50'])}, "
           f"p99 {_fmt_ms(lat['p99'])}, max {_fmt_ms(lat['max'])}")
@@ -169,6 +189,11 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--mcap", "--record", dest="mcap", metavar="DIR", help="record to this rosbag2/MCAP directory")
     n.add_argument("--rrd", metavar="OUT", help="log to this rerun .rrd file")
     n.add_argument("--summary-json", metavar="OUT", help="write the run summary here on exit")
+    n.add_argument("--step-margin", type=float, help="realtime: s before its deadline at which an idle step "
+                   "starts (default 0.0004)")
+    n.add_argument("--cpu-affinity", help="realtime: CPU ids of the stepping thread, e.g. 1 or 0,1")
+    n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread")
+    n.add_argument("--diagnostics-rate", type=float, help="Hz of /diagnostics (default 1; 0 disables)")
     n.add_argument("--quiet", action="store_true", help="do not print the summary")
     n.add_argument("--ros-args", nargs=argparse.REMAINDER, default=None, help="ROS arguments (e.g. -p dt:=0.002)")
     n.set_defaults(func=cmd_node, record=None)
@@ -204,5 +229,7 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--publish-rate", type=float)
     d.add_argument("--mcap", metavar="DIR", help="record the node's run here")
     d.add_argument("--rrd", metavar="OUT")
+    d.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority of the node's stepping thread")
+    d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
     d.add_argument("--out", default="build/demo", help="directory of the JSON summaries")
     d.set_defaults(func=cmd_demo)

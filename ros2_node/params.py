@@ -64,6 +64,12 @@ SPECS: tuple[ParamSpec, ...] = (
               "commands have started; 0 = never", low=0.0, high=1e9),
     ParamSpec("max_lag", 0.1, "realtime: when the twin is this far behind the wall clock (s), re-anchor "
               "the schedule (counted as an overrun) instead of rushing to catch up", low=1e-3, high=1e6),
+    ParamSpec("step_margin", 4.0e-4, "realtime: a step without a waiting command starts this long before its "
+              "deadline (s); a command starts its step at once", low=0.0, high=1.0),
+    ParamSpec("cpu_affinity", "", "realtime: comma-separated CPU ids for the stepping thread ('' = any CPU)"),
+    ParamSpec("rt_priority", 0, "realtime: SCHED_FIFO priority of the stepping thread (1-99; 0 = the normal "
+              "scheduler); needs CAP_SYS_NICE or an rtprio limit, else a warning", low=0, high=99),
+    ParamSpec("diagnostics_rate", 1.0, "rate (Hz of wall time) of /diagnostics; 0 disables", low=0.0, high=100.0),
     ParamSpec("record", "", "record inputs and outputs to this rosbag2/MCAP directory ('' = none)"),
     ParamSpec("rrd", "", "log the twin to this rerun .rrd file ('' = none)"),
     ParamSpec("summary_json", "", "write the run summary (JSON) here on exit ('' = none)"),
@@ -96,6 +102,10 @@ class NodeParams:
     duration: float = 0.0
     idle_timeout: float = 0.0
     max_lag: float = 0.1
+    step_margin: float = 4.0e-4
+    cpu_affinity: str = ""
+    rt_priority: int = 0
+    diagnostics_rate: float = 1.0
     record: str = ""
     rrd: str = ""
     summary_json: str = ""

@@ -46,9 +46,11 @@ STATUS = Topic("~/status", "flexmb_msgs/msg/TwinStatus", "out",
 CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", "out", "simulated time, when the node owns time")
 TF = Topic("/tf", "tf2_msgs/msg/TFMessage", "out",
            "world → platform frames (recorded always; published live where tf2_msgs is installed)")
+DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "out",
+                    "solver health, deadline misses, command rejections (live only, at diagnostics_rate)")
 
 INPUTS = (COMMANDS, ACTUATOR_COMMANDS, TRAJECTORY)
-OUTPUTS = (JOINT_STATES, ACTUATOR_STATES, PLATFORM_POSE, SHAPE, STATUS, CLOCK, TF)
+OUTPUTS = (JOINT_STATES, ACTUATOR_STATES, PLATFORM_POSE, SHAPE, STATUS, CLOCK, TF, DIAGNOSTICS)
 ALL = INPUTS + OUTPUTS
 
 

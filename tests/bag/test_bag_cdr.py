@@ -40,7 +40,7 @@ def _sample_messages() -> dict:
             "kinetic_energy": 1.0, "strain_energy": 2.0, "total_energy": 3.0, "step_wall_time": 3e-5,
             "steps": 2 ** 40, "deadline_misses": 0, "unconverged_steps": 1, "real_time_factor": 20.5,
             "sim_time": 0.5, "substeps": 2, "message": "sub-steps: 2 — ok", "command_stamp": M.stamp(0.499),
-            "command_latency": 0.0, "rejected_commands": 3},
+            "command_latency": 0.0, "rejected_commands": 3, "command_age": 0.25},
         "rosgraph_msgs/msg/Clock": M.clock(12.345678901),
         "tf2_msgs/msg/TFMessage": {"transforms": [{"header": M.header(0.5), "child_frame_id": "platform",
                                                    "transform": {"translation": {"x": 1.0, "y": 0.0, "z": 0.5},

@@ -60,9 +60,9 @@ class TwinClient:
                          durability=DurabilityPolicy.VOLATILE)
         self.pub = {t.name: self.node.create_publisher(message_class(t.type), t.resolved(twin), qos)
                     for t in T.INPUTS}
-        self.received: dict[str, list] = {t.name: [] for t in (T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE,
-                                                                T.ACTUATOR_STATES, T.CLOCK, T.SHAPE)}
-        for t in (T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE, T.ACTUATOR_STATES, T.CLOCK, T.SHAPE):
+        outputs = (T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE, T.ACTUATOR_STATES, T.CLOCK, T.SHAPE, T.DIAGNOSTICS)
+        self.received: dict[str, list] = {t.name: [] for t in outputs}
+        for t in outputs:
             self.node.create_subscription(message_class(t.type), t.resolved(twin),
                                           lambda m, _n=t.name: self.received[_n].append(m), qos)
         self.executor = SingleThreadedExecutor(context=self.context)

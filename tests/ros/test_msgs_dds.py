@@ -177,7 +177,7 @@ def test_twin_status_round_trip():
         "sim_time": 123.456,
         "substeps": 4,
         "message": "step 17: residual 1e-3 > tol (Δt halved)",
-        "command_latency": 2.5e-4,
+        "command_latency": 2.5e-4, "command_age": 1.5e-3,
         "rejected_commands": 2**33 + 1,
     }
     _assert_all_fields_listed(TwinStatus, values | {"command_stamp": None})

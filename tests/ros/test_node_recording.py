@@ -47,7 +47,7 @@ def test_lockstep_node_recording_replays_bit_identically(tmp_path, dds_env):
                               f"step {k}", node)
     finally:
         client.close()
-        assert node.stop() == 0, node.log()     # SIGINT: the recorder closes the bag
+        assert node.stop() == 130, node.log()     # SIGINT: the recorder closes the bag
     reader = BagReader(bag)
     counts = reader.counts()
     assert counts[T.ACTUATOR_COMMANDS.resolved()] == 200 and not reader.truncated
@@ -102,7 +102,7 @@ def test_lockstep_node_publishes_records_and_logs_the_shells(tmp_path, dds_env):
                           "the last shape", node)
     finally:
         client.close()
-        assert node.stop() == 0, node.log()
+        assert node.stop() == 130, node.log()
     members = [m.name for m in model.members]
     live = {stamp(m): m for m in client.received[T.SHAPE.name]}
     recorded = {stamp(m): m for m in (r.decode() for r in BagReader(bag).messages({T.SHAPE.resolved()}))}

@@ -1,0 +1,318 @@
+"""The twin's time loop on a thread of its own (no ROS here: the node wires it to rclpy).
+
+:class:`Stepper` owns the :class:`~ros2_node.twin.TwinRunner` once started: it alone applies
+commands and steps, so the runner needs no lock. Its loop takes the commands that arrived (a
+``deque`` the subscriptions append to), calls the numba step (which releases the GIL, so the
+executor and the publisher run meanwhile), and copies what the publisher needs into a
+preallocated ring of :class:`Snapshot` slots. Nothing in the loop builds a message or writes a
+file; the publisher thread turns due snapshots into messages.
+
+Pacing (``realtime``). State ``n`` stands for the wall time ``t0 + nΔt``. The step to state
+``n + 1`` must end by its deadline ``t0 + (n+1)Δt`` and may start from ``t0 + nΔt`` on (the twin
+is at most one step ahead of the wall clock). It starts at once when a command is waiting — so a
+command is answered within one step's compute time instead of waiting for the next tick — and
+otherwise at the latest safe moment, ``margin`` before its deadline, so that a command arriving
+late in the period still makes the step. A step that ends after its deadline is a deadline miss;
+one that ends more than ``max_lag`` late re-anchors the clock (an overrun) instead of bursting.
+``lockstep``: one step per command, as soon as it arrives.
+"""
+
+from __future__ import annotations
+
+import collections
+import ctypes
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexmb_core.model.workspace import State
+
+from .twin import TwinRunner, apply_message
+
+_PR_SET_TIMERSLACK = 29
+
+
+def _timer_slack(ns: int) -> bool:
+    """Shorten this thread's timer slack (Linux default 50 µs of lateness on every sleep)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> list[str]:
+    """Pin the calling thread to ``cpus`` and give it SCHED_FIFO ``rt_priority`` (0: neither).
+    Returns the warnings for what the OS refused (no privilege, no such CPU)."""
+    warnings = []
+    if cpus:
+        try:
+            os.sched_setaffinity(0, set(cpus))
+        except (OSError, ValueError) as exc:
+            warnings.append(f"cpu_affinity {list(cpus)} not applied ({exc}); the step thread runs on any CPU")
+    if rt_priority > 0:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+        except (OSError, AttributeError) as exc:
+            warnings.append(f"rt_priority {rt_priority} (SCHED_FIFO) not applied ({exc}): it needs CAP_SYS_NICE "
+                            "or an rtprio limit (ulimit -r); the step thread keeps the normal scheduler")
+    return warnings
+
+
+@dataclass
+class Snapshot:
+    """One published step: the state after it and what the publisher needs to report it.
+
+    ``state`` arrays are owned by the slot (copied into, never re-allocated)."""
+
+    state: State
+    seq: int = -1
+    result: object = None            # StepResult of the step (None: the initial state)
+    advanced: bool = False
+    message: str = ""
+    step_wall: float = 0.0           # s of wall time of the step
+    end_wall: float = 0.0            # perf_counter at the step's end
+    lateness: float = 0.0            # s past the deadline (> 0: missed), realtime only
+    due: bool = False                # joint/actuator states, poses, /tf, /clock
+    shape_due: bool = False
+    on_command: bool = False         # first step that used a new command
+    ack: bool = False                # lockstep: the acknowledgement of one command
+    cmd_recv_wall: float = 0.0       # perf_counter at the reception of the command it answers
+    steps: int = 0
+    failed_steps: int = 0
+    flagged_steps: int = 0
+    rejected: int = 0
+    newest_stamp: float = 0.0
+
+
+@dataclass
+class StepperConfig:
+    """Pacing of the stepping thread (node parameters of the same names)."""
+
+    mode: str = "realtime"
+    publish_every: int = 1           # steps between two state publications
+    shape_every: int = 0             # steps between two shapes (0: never)
+    publish_on_command: bool = True
+    max_lag: float = 0.1             # s
+    margin: float = 4.0e-4           # s before a deadline at which an idle step starts
+    duration: float = 0.0            # s of simulated time; 0: until stopped
+    capacity: int = 256              # snapshot slots (the publisher may lag this many publications)
+    cpu_affinity: tuple[int, ...] = ()
+    rt_priority: int = 0
+    window: int = 1000               # steps over which recent deadline misses are counted
+
+
+@dataclass
+class StepperStats:
+    """Counters the publisher reads (written by the stepping thread only)."""
+
+    steps_advanced: int = 0
+    deadline_misses: int = 0
+    overruns: int = 0
+    dropped_snapshots: int = 0       # publications the publisher fell too far behind to make
+    recent_misses: int = 0           # deadline misses within the last ``window`` steps
+
+
+class Samples:
+    """The newest ``capacity`` values of a per-step quantity, in a buffer allocated once (a node
+    runs for hours: a growing list would allocate at every step), and the count and sum of all."""
+
+    def __init__(self, capacity: int = 1 << 19):
+        self._buf = np.empty(capacity)
+        self.count = 0
+        self.total = 0.0
+
+    def add(self, x: float) -> None:
+        self._buf[self.count % self._buf.size] = x
+        self.count += 1
+        self.total += x
+
+    def percentiles(self, qs=(50, 99), sign: float = 1.0) -> dict:
+        """Percentiles of ``sign`` × the values in the window, its max, and how many it holds."""
+        a = sign * self._buf[:min(self.count, self._buf.size)]
+        if not a.size:
+            return {f"p{q}": 0.0 for q in qs} | {"max": 0.0, "count": 0}
+        return {f"p{q}": float(np.percentile(a, q)) for q in qs} | {"max": float(a.max()), "count": int(a.size)}
+
+
+class Stepper:
+    """The stepping thread of one twin (see the module).
+
+    Parameters
+    ----------
+    runner : a started :class:`TwinRunner`; the stepper owns it from :meth:`start` on.
+    config : pacing and publication decimation.
+    notify : called (from the stepping thread) after a snapshot or command event is queued.
+    """
+
+    def __init__(self, runner: TwinRunner, config: StepperConfig, notify):
+        self.runner = runner
+        self.cfg = config
+        self.dt = runner.dt
+        self._notify = notify
+        # (topic, kind, msg, recv_wall, tag) in; ("cmd", topic, kind, msg, t_applied, rejection,
+        # recv_wall, tag) | ("out", slot, seq) out, in the order things happened
+        self.inbox: collections.deque = collections.deque()
+        self.outbox: collections.deque = collections.deque()
+        self.wake = threading.Event()
+        self._ready = threading.Event()
+        self.stop_event = threading.Event()
+        self.finished = threading.Event()
+        st = runner.sim.state
+        self.slots = [Snapshot(st.copy()) for _ in range(config.capacity)]
+        self._seq = 0
+        self.stats = StepperStats()
+        self.step_walls = Samples()
+        self.lateness = Samples()
+        self._miss_ring = np.zeros(config.window, dtype=np.int8)
+        self._new_command = False
+        self._cmd_recv_wall = 0.0
+        self.warnings: list[str] = []
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._main, name="flexmb-step", daemon=True)
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Queue the initial state, start the thread; returns once its scheduling is set (the
+        warnings of what the OS refused are in :attr:`warnings` then)."""
+        self._snapshot(self.runner.sim.last, False, "", 0.0, 0.0, True, True, False, False)
+        self._thread.start()
+        self._ready.wait(5.0)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self.stop_event.set()
+        self.wake.set()
+        self._thread.join(timeout)
+
+    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None) -> None:
+        """A command message arrived (any thread): queue it and wake the stepping thread. ``tag``
+        comes back with the message's event in :attr:`outbox`."""
+        self.inbox.append((topic, kind, msg, recv_wall, tag))
+        self.wake.set()
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    # -- the loop ---------------------------------------------------------------------------------
+    def _main(self) -> None:
+        try:
+            _timer_slack(1000)
+            self.warnings += apply_thread_scheduling(self.cfg.cpu_affinity, self.cfg.rt_priority)
+            self._ready.set()
+            if self.cfg.mode == "lockstep":
+                self._loop_lockstep()
+            else:
+                self._loop_realtime()
+        except BaseException as exc:           # reported by the node, never a silent dead thread
+            self.error = exc
+        finally:
+            self._ready.set()
+            self.finished.set()
+            self._notify()
+
+    def _done(self) -> bool:
+        d = self.cfg.duration
+        return self.stop_event.is_set() or (d > 0 and self.runner.t >= d - 0.5 * self.dt)
+
+    def _loop_realtime(self) -> None:
+        dt, margin = self.dt, self.cfg.margin
+        inbox, wake, clock = self.inbox, self.wake, time.perf_counter
+        t0 = clock()
+        n = 0
+        while not self._done():
+            earliest = t0 + n * dt
+            deadline = earliest + dt
+            latest = deadline - margin
+            while True:
+                wake.clear()
+                now = clock()
+                if now >= latest or (inbox and now >= earliest):
+                    break
+                if self.stop_event.is_set():
+                    return
+                wake.wait((earliest if inbox else latest) - now)
+            self._apply_commands()
+            end = self._step(deadline)
+            n += 1
+            if end - deadline > self.cfg.max_lag:    # far behind: re-anchor instead of bursting
+                self.stats.overruns += 1
+                t0 = end - n * dt
+
+    def _loop_lockstep(self) -> None:
+        while not self._done():
+            self.wake.clear()
+            if not self.inbox:
+                self.wake.wait(0.05)
+                continue
+            self._apply_commands(limit=1)
+            self._step(math.inf, ack=True)
+
+    # -- one step ----------------------------------------------------------------------------------
+    def _apply_commands(self, limit: int = 1 << 30) -> None:
+        runner = self.runner
+        k = 0
+        while self.inbox and k < limit:
+            topic, kind, msg, recv_wall, tag = self.inbox.popleft()
+            k += 1
+            t_applied = runner.t
+            try:
+                rejection = apply_message(runner, kind, topic, msg)
+            except Exception as exc:            # a message the checks did not foresee: rejected whole
+                rejection = f"{topic}: rejected: {type(exc).__name__}: {exc}"
+            if rejection is None:
+                self._new_command = True
+                self._cmd_recv_wall = recv_wall
+            self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
+
+    def _step(self, deadline: float, ack: bool = False) -> float:
+        """One step, its timing, and a snapshot when something is due; returns its end (perf_counter)."""
+        runner, cfg = self.runner, self.cfg
+        a = time.perf_counter()
+        outcome = runner.step()
+        b = time.perf_counter()
+        wall = b - a
+        self.step_walls.add(wall)
+        late = b - deadline if deadline != math.inf else 0.0
+        missed = late > 0.0
+        if deadline != math.inf:
+            self.lateness.add(late)
+            ring = self._miss_ring
+            i = runner.counters.steps % ring.size
+            self.stats.recent_misses += int(missed) - int(ring[i])
+            ring[i] = missed
+            if missed:
+                self.stats.deadline_misses += 1
+        if outcome.advanced:
+            self.stats.steps_advanced += 1
+        k = self.stats.steps_advanced
+        on_command = cfg.publish_on_command and self._new_command and outcome.advanced
+        due = k % cfg.publish_every == 0 or not outcome.advanced
+        shape_due = bool(cfg.shape_every) and k % cfg.shape_every == 0
+        message = outcome.message if (not outcome.converged or outcome.message) else ""
+        if due or on_command or shape_due or ack:
+            self._snapshot(runner.sim.last, outcome.advanced, message, wall, late, due, shape_due, on_command, ack)
+            if on_command:
+                self._new_command = False
+        return b
+
+    def _snapshot(self, result, advanced, message, wall, late, due, shape_due, on_command, ack) -> None:
+        runner = self.runner
+        i = self._seq % len(self.slots)
+        s = self.slots[i]
+        s.state.assign(runner.sim.state)
+        s.seq = self._seq
+        s.result, s.advanced, s.message = result, advanced, message
+        s.step_wall, s.end_wall, s.lateness = wall, time.perf_counter(), late
+        s.due, s.shape_due, s.on_command, s.ack = due, shape_due, on_command, ack
+        s.cmd_recv_wall = self._cmd_recv_wall if on_command else 0.0
+        c = runner.counters
+        s.steps, s.failed_steps, s.flagged_steps = c.steps, c.failed_steps, c.flagged_steps
+        s.rejected, s.newest_stamp = runner.rejected_commands, runner.newest_command_stamp
+        self.outbox.append(("out", i, self._seq))
+        self._seq += 1
+        self._notify()

@@ -1,0 +1,76 @@
+"""The realtime twin on real DDS: a twin that cannot keep up says so (log, status, /diagnostics),
+and the node's summary accounts for its deadlines and CPU."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("diagnostic_msgs")
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+
+from dds_harness import NodeProcess, TwinClient
+from ros2_node import topics as T
+
+pytestmark = pytest.mark.ros
+SCENE = "scenes/stewart_platform_bars.yaml"
+OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN          # byte fields: b'\x00', b'\x01'
+
+
+
+@pytest.mark.timeout(180)
+def test_an_overloaded_twin_reports_that_it_is_behind(tmp_path, dds_env):
+    """Δt = 20 µs: the bar twin's step (~20 µs of solver alone, more with the Python around it)
+    cannot keep 50 kHz, so every window of steps misses deadlines. The node must log it, put the reason in status.message and
+    raise the deadlines entry of /diagnostics to WARN."""
+    summary = tmp_path / "s.json"
+    node = NodeProcess([SCENE, "--mode", "realtime", "--dt", "2e-5", "--duration", "1.0", "--publish-rate", "2000",
+                        "--diagnostics-rate", "5", "--summary-json", str(summary), "--quiet"], dds_env,
+                       tmp_path / "node.log")
+    client = TwinClient()
+    try:
+        client.wait_for_twin(node)
+        client.spin_until(lambda: any("behind real time" in s.message for s in client.statuses()), 60,
+                          "a status that says the twin is behind", node)
+        client.spin_until(lambda: any(st.name.endswith(": deadlines") and st.level == WARN
+                                      for d in client.received[T.DIAGNOSTICS.name] for st in d.status), 30,
+                          "a WARN deadlines entry on /diagnostics", node)
+    finally:
+        client.close()
+    node.proc.wait(timeout=120)
+    assert node.stop() == 0, node.log()          # it ran its duration out
+    log = node.log_path.read_text()
+    assert "behind real time:" in log and "missed their deadline" in log, log[-2000:]
+    s = json.loads(summary.read_text())
+    assert s["deadline_misses"] > 0 and s["steps"] == 50000
+    diag = [st for d in client.received[T.DIAGNOSTICS.name] for st in d.status]
+    names = {st.name for st in diag}
+    assert {"flexmb_twin: solver", "flexmb_twin: deadlines", "flexmb_twin: commands"} <= names
+    warn = next(st for st in diag if st.name.endswith(": deadlines") and st.level == WARN)
+    values = {kv.key: kv.value for kv in warn.values}
+    assert int(values["recent_misses"]) > 0 and "behind real time" in warn.message
+
+
+@pytest.mark.timeout(120)
+def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env):
+    """At the scene's Δt the bar twin keeps real time; the summary carries the deadline slack, the
+    step wall times and the node's CPU beyond its solver, and /diagnostics says OK for the solver."""
+    summary = tmp_path / "s.json"
+    node = NodeProcess([SCENE, "--mode", "realtime", "--duration", "6", "--diagnostics-rate", "5",
+                        "--summary-json", str(summary), "--quiet"], dds_env, tmp_path / "node.log")
+    client = TwinClient()
+    try:
+        client.wait_for_twin(node)
+        client.spin_until(lambda: len(client.received[T.DIAGNOSTICS.name]) >= 2, 30, "/diagnostics", node)
+    finally:
+        client.close()
+    node.proc.wait(timeout=60)
+    assert node.stop() == 0, node.log()
+    s = json.loads(summary.read_text())
+    assert s["steps"] == 6000 and s["failed_steps"] == 0
+    assert s["step_wall_time_s"]["count"] == 6000 and s["deadline_slack_s"]["count"] == 6000
+    cpu = s["cpu_time_s"]
+    assert cpu["process"] > cpu["solver_steps"] > 0
+    solver = [st for d in client.received[T.DIAGNOSTICS.name] for st in d.status if st.name.endswith(": solver")]
+    assert solver and all(st.level == OK for st in solver)
