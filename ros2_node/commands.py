@@ -45,6 +45,7 @@ BAD_STAMP, RATE, TOO_LARGE = "bad_stamp", "rate", "too_large"
 
 HOLDS = ("smooth", "ramp", "step")
 MAX_HOLD_PERIOD = 0.5        # s: longest ramp (commands slower than this are still held over 0.5 s)
+STALL_GRACE = 0.03           # s: a bare-length stream's line is followed this long past its hold, then fades
 _PERIOD_WINDOW = 8           # intervals in the median of the observed command period
 _EXCERPT = 6                 # values quoted in a rejection message
 _NAME_CHARS = 40             # characters of one name quoted in a rejection message
@@ -518,8 +519,10 @@ class CommandSchedule:
             t1 = now + T
             self.base[idx], self.rate[idx] = self._predict(idx, lengths, tau, stamp > 0, T, t1)
             self.t_ref[idx] = t1
-            self.fade_t[idx] = t1 + T
-            self.fade_T[idx] = T
+            # a late sample, a stalled transport: the line goes on for a while (at least STALL_GRACE)
+            # before its rate fades to rest, so a stall of a few tens of ms is not a stop and go
+            self.fade_t[idx] = t1 + max(T, STALL_GRACE)
+            self.fade_T[idx] = max(T, STALL_GRACE)
         else:
             self.base[idx] = lengths
             self.rate[idx] = 0.0
