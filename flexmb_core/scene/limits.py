@@ -15,8 +15,8 @@ class Limits:
     shared ones; ``max_yaml_nodes``: YAML values after alias expansion (refuses alias bombs);
     ``max_file_bytes``: size of the scene file."""
 
-    max_elements: int = 20_000
-    max_dofs: int = 250_000
+    max_elements: int = 5_000
+    max_dofs: int = 150_000
     max_yaml_nodes: int = 100_000
     max_file_bytes: int = 4_000_000
 
