@@ -162,7 +162,7 @@ def _profile_python(model, until: float) -> tuple[dict, float, dict]:
         _ = time.perf_counter_ns() - t1
     per_wrap = (time.perf_counter_ns() - t0) / n
     return {k: (c / steps, (ns - c * per_wrap) / 1000 / steps) for k, (ns, c) in acc.items()}, wall / steps * 1e6, \
-        {"iterations": float(np.mean(sim.stats.iterations)), "tangents": sim._dynamic.tangent_updates / steps}
+        {"iterations": sim.stats.iterations_total / max(sim.stats.steps, 1), "tangents": sim._dynamic.tangent_updates / steps}
 
 
 def _interleaved(model, until: float, rounds: int = 7) -> tuple[float, float, float]:
@@ -278,7 +278,7 @@ def _profile_numba(model, until: float) -> tuple[float, float, dict]:
         finally:
             F.frame_step = kern
         (inside if wrapped else totals).append((wall / sim.stats.steps * 1e6, spent[0] / sim.stats.steps / 1000))
-    counts = {"iterations": float(np.mean(sim.stats.iterations)), "tangents": sim._dynamic.tangent_updates /
+    counts = {"iterations": sim.stats.iterations_total / max(sim.stats.steps, 1), "tangents": sim._dynamic.tangent_updates /
               sim.stats.steps}
     return min(t for t, _ in totals), min(k for _, k in inside), counts
 

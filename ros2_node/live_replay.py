@@ -162,6 +162,9 @@ def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1
                 "--mcap", out, "--quiet"]
     if integrator:
         node_cmd += ["--integrator", integrator]
+    # the recording's command hold (bags from before holds existed stepped: 'step')
+    hold = (old.setting("runner_options", {}, as_json=True) or {}).get("command_hold", "step")
+    node_cmd += ["--ros-args", "-p", f"command_hold:={hold}"]
     node = subprocess.Popen(node_cmd, env=env)
     try:
         _publish_all(commands, inputs, node_name, node, timeout)

@@ -97,12 +97,14 @@ def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[
                   for k in ("dt", "integrator") if reader.setting(k) is not None}
     solver.update(user_solver)
     scene = scene_from_dict(data, source=source, overrides=solver)
-    fields = {f.name for f in dataclasses.fields(RunnerOptions)}
-    unknown = sorted(set(opts) - fields)
+    fields = {f.name: f for f in dataclasses.fields(RunnerOptions)}
+    unknown = sorted(set(opts) - set(fields))
     if unknown:
         raise ReplayError(f"{reader.path}: runner_options {unknown} unknown to this flexmb (has {sorted(fields)})")
-    options = RunnerOptions(**{k: (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
-                               for k, v in opts.items()})
+    # bags from before command holds existed applied every command as a step from its step on
+    opts.setdefault("command_hold", "step")
+    options = RunnerOptions(**{k: (float(v) if isinstance(fields[k].default, float) and isinstance(v, int)
+                                   and not isinstance(v, bool) else v) for k, v in opts.items()})
     return Twin(scene, compile_scene(scene), options, reader.setting("node_name") or T.DEFAULT_NODE_NAME,
                 float(until) if until is not None else None, scene_sha256(text), source)
 

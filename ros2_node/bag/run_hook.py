@@ -58,7 +58,9 @@ def run_settings(scene, *, until: float, record_rate: float, shape_rate: float,
 
     spec = scene.solver
     return {"source": "flexmb run", "solver": dataclasses.asdict(spec),
-            "runner_options": dataclasses.asdict(RunnerOptions()), "until": repr(float(until)),
+            # an offline run applies each command (the scene's law, sampled per step) to its own
+            # step: its replay holds them the same way, not through a stream hold
+            "runner_options": dataclasses.asdict(RunnerOptions(command_hold="step")), "until": repr(float(until)),
             "dt": repr(float(spec.dt)), "integrator": spec.integrator, "tolerance": repr(float(spec.tolerance)),
             "record_rate": repr(float(record_rate)), "shape_rate": repr(float(shape_rate)), "node_name": node_name}
 
