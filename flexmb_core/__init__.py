@@ -4,3 +4,13 @@ The core never imports ROS or rerun; adapters in ``ros2_node`` and ``flexmb_core
 """
 
 __version__ = "0.1.0"
+
+
+def _fresh_numba_cache() -> None:
+    # before any kernel is loaded from numba's cache (see flexmb_core.numba_cache)
+    from .numba_cache import ensure_fresh
+
+    ensure_fresh()
+
+
+_fresh_numba_cache()

@@ -6,11 +6,12 @@ mechanism out (``/joint_states``, ``~/actuator_states``, ``~/platform_pose``, ``
 
 Three threads, so that the time loop never waits for the interpreter's other work:
 
-- the **stepping thread** (:class:`~ros2_node.realtime.Stepper`) applies the commands, runs the
-  numba step (GIL released) paced to absolute deadlines, and copies the state into a ring of
-  preallocated snapshots;
-- the **executor** (the main thread, rclpy's C++ ``EventsExecutor``) only hands received command
-  messages to the stepping thread;
+- the **stepping thread** (:class:`~ros2_node.realtime.Stepper`) runs the numba step (GIL
+  released) paced to absolute deadlines, and copies the state into a ring of preallocated
+  snapshots;
+- the **executor** (the main thread, rclpy's C++ ``EventsExecutor``) validates and applies the
+  command messages it receives (one lock keeps a command and a step apart) and wakes the stepping
+  thread;
 - the **publisher thread** turns due snapshots into messages, built once per publication (decimated
   by ``publish_rate``), publishes and records them, and reports health: ``~/status``,
   ``/diagnostics`` and a throttled warning when the twin falls behind the wall clock.
@@ -230,7 +231,7 @@ class TwinNode:
             self._set_rates()
         return SetParametersResult(successful=True)
 
-    # -- inputs (executor thread): hand the message to the stepping thread ------------------------------
+    # -- inputs (executor thread): validate, apply, wake the stepping thread -----------------------------
     def _warn(self, key: str, text: str) -> None:
         now = time.monotonic()
         if now - self._warned.get(key, -math.inf) >= self.p.log_throttle:

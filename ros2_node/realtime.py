@@ -1,11 +1,13 @@
 """The twin's time loop on a thread of its own (no ROS here: the node wires it to rclpy).
 
-:class:`Stepper` owns the :class:`~ros2_node.twin.TwinRunner` once started: it alone applies
-commands and steps, so the runner needs no lock. Its loop takes the commands that arrived (a
-``deque`` the subscriptions append to), calls the numba step (which releases the GIL, so the
-executor and the publisher run meanwhile), and copies what the publisher needs into a
-preallocated ring of :class:`Snapshot` slots. Nothing in the loop builds a message or writes a
-file; the publisher thread turns due snapshots into messages.
+:class:`Stepper` runs the :class:`~ros2_node.twin.TwinRunner`'s steps: it calls the numba step
+(which releases the GIL, so the executor and the publisher run meanwhile) and copies what the
+publisher needs into a preallocated ring of :class:`Snapshot` slots. Nothing in the loop builds a
+message or writes a file; the publisher thread turns due snapshots into messages. Commands are
+validated and applied by the thread that receives them (:meth:`Stepper.submit`, the executor), so
+their Python stays off the stepping thread; one lock makes a command and a step exclude each
+other, so a command applied while the twin is at ``t_n`` acts on the step ``t_n → t_n + Δt``
+— the time it is recorded with, which a replay re-applies it at.
 
 Pacing (``realtime``). State ``n`` stands for the wall time ``t0 + nΔt``. The step to state
 ``n + 1`` must end by its deadline ``t0 + (n+1)Δt`` and may start from ``t0 + nΔt`` on (the twin
@@ -154,10 +156,11 @@ class Stepper:
         self.cfg = config
         self.dt = runner.dt
         self._notify = notify
-        # (topic, kind, msg, recv_wall, tag) in; ("cmd", topic, kind, msg, t_applied, rejection,
-        # recv_wall, tag) | ("out", slot, seq) out, in the order things happened
-        self.inbox: collections.deque = collections.deque()
+        # ("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag) | ("out", slot, seq), in
+        # the order things happened (appended under the lock)
         self.outbox: collections.deque = collections.deque()
+        self._lock = threading.Lock()         # a command application and a step exclude each other
+        self._pending = 0                     # commands applied since the last step began
         self.wake = threading.Event()
         self._ready = threading.Event()
         self.stop_event = threading.Event()
@@ -189,10 +192,23 @@ class Stepper:
         self._thread.join(timeout)
 
     def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None) -> None:
-        """A command message arrived (any thread): queue it and wake the stepping thread. ``tag``
-        comes back with the message's event in :attr:`outbox`."""
-        self.inbox.append((topic, kind, msg, recv_wall, tag))
+        """A command message arrived (any thread): validate and apply it at the twin's current
+        time, queue its event (``tag`` comes back with it in :attr:`outbox`) and wake the stepping
+        thread, which starts the step that uses it at once (realtime: if the twin is not a step
+        ahead already; lockstep: one step per message)."""
+        with self._lock:
+            t_applied = self.runner.t
+            try:
+                rejection = apply_message(self.runner, kind, topic, msg)
+            except Exception as exc:            # a message the checks did not foresee: rejected whole
+                rejection = f"{topic}: rejected: {type(exc).__name__}: {str(exc)[:200]}"
+            if rejection is None:
+                self._new_command = True
+                self._cmd_recv_wall = recv_wall
+            self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
+            self._pending += 1
         self.wake.set()
+        self._notify()
 
     @property
     def alive(self) -> bool:
@@ -221,7 +237,7 @@ class Stepper:
 
     def _loop_realtime(self) -> None:
         dt, margin = self.dt, self.cfg.margin
-        inbox, wake, clock = self.inbox, self.wake, time.perf_counter
+        wake, clock, lock = self.wake, time.perf_counter, self._lock
         t0 = clock()
         n = 0
         while not self._done():
@@ -231,13 +247,15 @@ class Stepper:
             while True:
                 wake.clear()
                 now = clock()
-                if now >= latest or (inbox and now >= earliest):
+                pending = self._pending
+                if now >= latest or (pending and now >= earliest):
                     break
                 if self.stop_event.is_set():
                     return
-                wake.wait((earliest if inbox else latest) - now)
-            self._apply_commands()
-            end = self._step(deadline)
+                wake.wait((earliest if pending else latest) - now)
+            with lock:
+                self._pending = 0
+                end = self._step(deadline)
             n += 1
             if end - deadline > self.cfg.max_lag:    # far behind: re-anchor instead of bursting
                 self.stats.overruns += 1
@@ -246,29 +264,14 @@ class Stepper:
     def _loop_lockstep(self) -> None:
         while not self._done():
             self.wake.clear()
-            if not self.inbox:
+            if not self._pending:
                 self.wake.wait(0.05)
                 continue
-            self._apply_commands(limit=1)
-            self._step(math.inf, ack=True)
+            with self._lock:
+                self._pending -= 1
+                self._step(math.inf, ack=True)
 
     # -- one step ----------------------------------------------------------------------------------
-    def _apply_commands(self, limit: int = 1 << 30) -> None:
-        runner = self.runner
-        k = 0
-        while self.inbox and k < limit:
-            topic, kind, msg, recv_wall, tag = self.inbox.popleft()
-            k += 1
-            t_applied = runner.t
-            try:
-                rejection = apply_message(runner, kind, topic, msg)
-            except Exception as exc:            # a message the checks did not foresee: rejected whole
-                rejection = f"{topic}: rejected: {type(exc).__name__}: {exc}"
-            if rejection is None:
-                self._new_command = True
-                self._cmd_recv_wall = recv_wall
-            self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
-
     def _step(self, deadline: float, ack: bool = False) -> float:
         """One step, its timing, and a snapshot when something is due; returns its end (perf_counter)."""
         runner, cfg = self.runner, self.cfg

@@ -223,6 +223,9 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
     # Undamped: the rates are not read, and the stretch rates and c_v are zero as in
     # assembly.assemble's undamped call (ws.zero_v, ws.zero_lam_rate).
     c_vk = c_v if damped else 0.0
+    # a bool from data, not the literal False: a literal argument compiles a second signature of
+    # frame_group and its element kernels (tests/unit/test_signatures.py)
+    no_dlam = dt < 0.0
     v_k = v_eval if damped else ve
     # -- Newton ------------------------------------------------------------------------------------
     for it in range(1, max_it + 1):
@@ -237,7 +240,7 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
         strain = 0.0
         diss = 0.0
         u_g, dp_g = frame_group(q, v_k, edofs, dax, dsec, w, nsec, mat, act, lam, lam_rate, c_vk, smap,
-                                refresh, False, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve,
+                                refresh, no_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve,
                                 re, ke, kn, straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg)
         strain += u_g
         diss += dp_g
