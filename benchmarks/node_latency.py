@@ -14,7 +14,7 @@ echoes its stamp. Then one long **soak** of the twin (default 10 min) counts mis
 the node's CPU time beyond its solver steps. Writes ``docs/benchmarks/node.json`` and ``node.md``.
 
     .venv/bin/python benchmarks/node_latency.py [--seconds 20] [--rounds 3] [--soak 600]
-        [--cases bars,frame1] [--rt-priority 0]
+        [--cases frame1] [--rt-priority N] [--rate 1000] [--name node]
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def _env() -> dict:
     return env
 
 
-def run_pingpong(seconds: float) -> dict:
+def run_pingpong(seconds: float, rate: float) -> dict:
     """The bare rclpy echo and the player: the player's latency percentiles."""
     env = _env()
     out = ROOT / "build" / "bench_node" / "pingpong.json"
@@ -58,7 +58,8 @@ def run_pingpong(seconds: float) -> dict:
                              str(seconds + 60)], env=env, cwd=ROOT)
     try:
         p = subprocess.run([sys.executable, "-m", "ros2_node.cli", "play", CASES["bars"][0], "--mode", "realtime",
-                            "--until", str(seconds), "--json", str(out), "--quiet", "--timeout", "60"],
+                            "--until", str(seconds), "--json", str(out), "--quiet", "--timeout", "60", "--rate",
+                            str(rate)],
                            env=env, cwd=ROOT, capture_output=True, text=True)
     finally:
         echo.terminate()
@@ -70,13 +71,13 @@ def run_pingpong(seconds: float) -> dict:
             "latency_p99_ms": 1e3 * lat["p99"], "latency_max_ms": 1e3 * lat["max"], "latency_count": lat["count"]}
 
 
-def run_twin(name: str, seconds: float, rt_priority: int) -> dict:
+def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float) -> dict:
     """``flexmb demo`` of one case: the node's and the player's summaries, flattened."""
     scene, what = CASES[name]
     out = ROOT / "build" / "bench_node" / name
     cmd = [sys.executable, "-m", "ros2_node.cli", "demo", scene, "--mode", "realtime", "--until", str(seconds),
-           "--out", str(out)]
-    if rt_priority:
+           "--out", str(out), "--rate", str(rate)]
+    if rt_priority is not None:
         cmd += ["--rt-priority", str(rt_priority)]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=_env(), cwd=ROOT, capture_output=True, text=True)
@@ -88,7 +89,8 @@ def run_twin(name: str, seconds: float, rt_priority: int) -> dict:
     return {"kind": "twin", "case": name, "scene": scene, "what": what, "seconds": seconds,
             "wall_s": time.perf_counter() - t0, "steps": n["steps"], "rtf": n["rtf"], "solver_rtf": n["solver_rtf"],
             "deadline_misses": n["deadline_misses"], "overruns": n["overruns"],
-            "dropped_publications": n["dropped_publications"],
+            "dropped_publications": n["dropped_publications"], "coalesced": n["coalesced_publications"],
+            "commands_unanswered": pl["commands_unanswered"],
             "step_wall_p50_ms": 1e3 * n["step_wall_time_s"]["p50"], "step_wall_p99_ms": 1e3 * n["step_wall_time_s"]["p99"],
             "step_wall_max_ms": 1e3 * n["step_wall_time_s"]["max"],
             "slack_p1_ms": 1e3 * n["deadline_slack_s"]["p1"],
@@ -110,7 +112,7 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
     DOCS.mkdir(parents=True, exist_ok=True)
     meta = {"python": sys.version.split()[0], "machine": platform.machine(), "cpus": os.cpu_count(),
             "date": time.strftime("%Y-%m-%d"), "seconds": args.seconds, "rounds": args.rounds, "soak_s": args.soak,
-            "rt_priority": args.rt_priority, "load_avg_start": args.load_start, "load_avg_end": os.getloadavg()}
+            "rt_priority": args.rt_priority, "command_rate_hz": args.rate, "load_avg_start": args.load_start, "load_avg_end": os.getloadavg()}
     pp = [r for r in rounds if r["kind"] == "pingpong"]
     tw = [r for r in rounds if r["kind"] == "twin"]
     verdict = {}
@@ -125,15 +127,16 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
                     "soak_cpu_beyond_solver_core": soak["cpu_beyond_solver_core"],
                     "cpu_target_met": soak["cpu_beyond_solver_core"] <= CPU_BEYOND_SOLVER_MAX,
                     "deadline_target_met": soak["deadline_misses"] == 0}
-    (DOCS / "node.json").write_text(json.dumps({"meta": meta, "verdict": verdict, "rounds": rounds, "soak": soak,
+    (DOCS / f"{args.name}.json").write_text(json.dumps({"meta": meta, "verdict": verdict, "rounds": rounds, "soak": soak,
                                                 "other_cases": extra}, indent=2) + "\n")
     lines = [
-        "# The twin node at 1 kHz on DDS (`benchmarks/node_latency.py`)",
+        f"# The twin node at 1 kHz on DDS, commands at {args.rate:g} Hz (`benchmarks/node_latency.py`)",
         "",
         f"{meta['cpus']} cores, Python {meta['python']}, {meta['date']}; load average at the start "
         f"{args.load_start[0]:.2f}, at the end {meta['load_avg_end'][0]:.2f}. Realtime mode, Δt = 1 ms, the "
-        "Stewart appendix commands at 1 kHz (`flexmb play`, `flexmb_msgs/ActuatorCommand`, stamped), node "
-        f"defaults (publish_rate 500 Hz, states also on every new command){', rt_priority ' + str(args.rt_priority) if args.rt_priority else ''}. "
+        f"Stewart appendix commands at {args.rate:g} Hz (`flexmb play`, `flexmb_msgs/ActuatorCommand`, stamped), node "
+        f"defaults (publish_rate 100 Hz, joint states and status also on every new command, rt_priority "
+        f"{args.rt_priority if args.rt_priority is not None else '-1: SCHED_FIFO 20 where allowed'}). "
         "Latency: the player publishes a command → it receives the status echoing the command's stamp. "
         "The ping-pong is `benchmarks/dds_echo.py`: the same client, messages, QoS and executor, no solver.",
         "",
@@ -175,34 +178,38 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
                          f"{r['deadline_misses']} / {r['steps']} | {r['step_wall_p50_ms']:.3f} / {r['step_wall_p99_ms']:.3f} | "
                          f"{r['latency_p50_ms']:.3f} / {r['latency_p99_ms']:.3f} |")
     lines.append("")
-    (DOCS / "node.md").write_text("\n".join(lines))
+    (DOCS / f"{args.name}.md").write_text("\n".join(lines))
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=20.0, help="s per interleaved round")
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rate", type=float, default=1000.0, help="commands per second of the client (both runs)")
+    ap.add_argument("--name", default="node", help="report name: docs/benchmarks/NAME.{md,json}")
     ap.add_argument("--soak", type=float, default=600.0, help="s of the long bar-twin run (0: none)")
     ap.add_argument("--cases", default="frame1", help="further cases, one run each (comma-separated; '' none)")
-    ap.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority of the stepping thread")
+    ap.add_argument("--rt-priority", type=int, default=None,
+                    help="SCHED_FIFO priority of the node's stepping thread (default: the node's, -1 = 20 where allowed)")
     args = ap.parse_args()
     args.load_start = os.getloadavg()
     rounds = []
     for _ in range(args.rounds):
-        for run in (lambda: run_pingpong(args.seconds), lambda: run_twin("bars", args.seconds, args.rt_priority)):
+        for run in (lambda: run_pingpong(args.seconds, args.rate),
+                    lambda: run_twin("bars", args.seconds, args.rt_priority, args.rate)):
             r = run()
             print(json.dumps(r), flush=True)
             rounds.append(r)
     extra = []
     for name in filter(None, args.cases.split(",")):
-        r = run_twin(name, args.seconds, args.rt_priority)
+        r = run_twin(name, args.seconds, args.rt_priority, args.rate)
         print(json.dumps(r), flush=True)
         extra.append(r)
-    soak = run_twin("bars", args.soak, args.rt_priority) if args.soak > 0 else None
+    soak = run_twin("bars", args.soak, args.rt_priority, args.rate) if args.soak > 0 else None
     if soak is not None:
         print(json.dumps(soak), flush=True)
     write(rounds, soak, extra, args)
-    print(f"wrote {DOCS / 'node.md'}")
+    print(f"wrote {DOCS / (args.name + '.md')}")
     return 0
 
 

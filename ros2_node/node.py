@@ -198,6 +198,8 @@ class TwinNode:
         self._rtf_window = collections.deque(maxlen=1024)
         self._published = 0
         self._listened: dict[str, bool] = {}      # topic → has subscribers (unknown: publish)
+        self._live = True                         # publish (else: record only) the state at hand
+        self._coalesced = 0                       # states recorded but not published: a newer one was
         self._warned: dict[str, float] = {}
         self._behind_message = ""
         self._last_sample = None
@@ -253,7 +255,7 @@ class TwinNode:
         """Publish ``fill()`` (a message filled by :class:`LiveMessages`, or None) when the topic has
         subscribers, and record ``make_dict()`` (the same content, from :mod:`ros2_node.messages`)."""
         pub = self._pub.get(topic.name)
-        if pub is not None and self._listened.get(topic.name, True):
+        if pub is not None and self._live and self._listened.get(topic.name, True):
             msg = fill()
             if msg is not None:
                 pub.publish(msg)
@@ -304,14 +306,15 @@ class TwinNode:
             return
         live = self.live
         message = snap.message
-        if snap.due or snap.on_command:
-            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s), t)
-            if snap.on_command:
-                self._latency = time.perf_counter() - snap.cmd_recv_wall
-                self._latencies.add(self._latency)
+        if snap.on_command:         # the state that answers a command: its latency, measured here
+            self._latency = time.perf_counter() - snap.cmd_recv_wall
+            self._latencies.add(self._latency)
         if snap.due or snap.on_command or snap.ack:
+            # the status first: it echoes the command's stamp, the acknowledgement clients wait for
             timing = self._timing(snap, message)
             self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing), t)
+        if snap.due or snap.on_command:
+            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s), t)
         if snap.due:
             self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s), t)
             for i, topic in enumerate(self._pose_topics):
@@ -337,13 +340,16 @@ class TwinNode:
         self._listened = {name: pub.get_subscription_count() > 0 for name, pub in self._pub.items()}
 
     def _drain_outbox(self) -> int:
-        """Publish and record every queued event in order; returns how many were handled."""
+        """Record every queued event in order and publish them; when several states queued up (the
+        publisher fell behind), only the newest goes out live — the older ones are stale by then —
+        and every one is still recorded. Returns how many events were handled."""
         out = self.stepper.outbox
-        slots = self.stepper.slots
-        k = 0
+        events = []
         while out:
-            ev = out.popleft()
-            k += 1
+            events.append(out.popleft())
+        slots = self.stepper.slots
+        newest = max((i for i, ev in enumerate(events) if ev[0] == "out"), default=-1)
+        for i, ev in enumerate(events):
             if ev[0] == "cmd":
                 self._on_command_event(*ev[1:])
                 continue
@@ -352,8 +358,12 @@ class TwinNode:
                 # the stepping thread lapped the ring: this publication was overwritten
                 self.stepper.stats.dropped_snapshots += 1
                 continue
+            self._live = i == newest
+            if not self._live:
+                self._coalesced += 1
             self._publish(snap)
-        return k
+        self._live = True
+        return len(events)
 
     def _check_health(self) -> None:
         """The throttled 'behind' warning and the reason in ``status.message``."""
@@ -472,6 +482,8 @@ class TwinNode:
             publisher.start()
             for w in self.stepper.warnings:
                 self.log.warning(w)
+            for note in self.stepper.notes:
+                self.log.info(note)
             while not self._done():
                 self.executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
@@ -503,7 +515,7 @@ class TwinNode:
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
-            "dropped_publications": st.dropped_snapshots,
+            "dropped_publications": st.dropped_snapshots, "coalesced_publications": self._coalesced,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
             "deadline_slack_s": self.stepper.lateness.percentiles((1, 50), sign=-1.0),
             "command_to_state_latency_s": self._latencies.percentiles(),

@@ -91,12 +91,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--mcap", args.mcap]
     if args.rrd:
         node_cmd += ["--rrd", args.rrd]
-    if args.rt_priority:
+    if args.rt_priority is not None:
         node_cmd += ["--rt-priority", str(args.rt_priority)]
     if args.cpu_affinity:
         node_cmd += ["--cpu-affinity", args.cpu_affinity]
     play_cmd = exe + ["play", args.scene, "--mode", args.mode, "--until", str(args.until), "--json", str(player_json),
-                      "--quiet", "--timeout", "120"]
+                      "--quiet", "--timeout", "120", "--rate", str(args.rate)]
     print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
           f"{args.mode}, {args.until:g} s", flush=True)
     node = subprocess.Popen(node_cmd, env=env)
@@ -178,7 +178,7 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--mode", choices=("realtime", "lockstep"))
     n.add_argument("--dt", type=float, help="time step (s); default: the scene's")
     n.add_argument("--integrator", choices=("newmark", "generalized_alpha", "chung_hulbert"))
-    n.add_argument("--publish-rate", type=float, help="Hz (default 500)")
+    n.add_argument("--publish-rate", type=float, help="Hz (default 100; states also answer every command)")
     n.add_argument("--shape-rate", type=float, help="Hz of ~/shape (default 30; 0 disables)")
     n.add_argument("--command-source", choices=("external", "scene"))
     n.add_argument("--command-timeout", type=float, help="s (default 0.5)")
@@ -192,7 +192,8 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--step-margin", type=float, help="realtime: s before its deadline at which an idle step "
                    "starts (default 0.0004)")
     n.add_argument("--cpu-affinity", help="realtime: CPU ids of the stepping thread, e.g. 1 or 0,1")
-    n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread")
+    n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread "
+                   "(0: normal scheduling; default -1: 20 where the OS allows it)")
     n.add_argument("--diagnostics-rate", type=float, help="Hz of /diagnostics (default 1; 0 disables)")
     n.add_argument("--quiet", action="store_true", help="do not print the summary")
     n.add_argument("--ros-args", nargs=argparse.REMAINDER, default=None, help="ROS arguments (e.g. -p dt:=0.002)")
@@ -227,6 +228,7 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
     d.add_argument("--until", type=float, default=20.0)
     d.add_argument("--publish-rate", type=float)
+    d.add_argument("--rate", type=float, default=1000.0, help="realtime: the player's commands per second")
     d.add_argument("--mcap", metavar="DIR", help="record the node's run here")
     d.add_argument("--rrd", metavar="OUT")
     d.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority of the node's stepping thread")

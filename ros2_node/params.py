@@ -30,8 +30,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("dt", 0.0, "time step Δt (s); 0 = the scene's solver.dt", low=0.0, high=1.0),
     ParamSpec("integrator", "", "override solver.integrator: newmark | generalized_alpha | chung_hulbert "
               "('' = the scene's)", choices=("", "newmark", "generalized_alpha", "chung_hulbert")),
-    ParamSpec("publish_rate", 500.0, "rate (Hz of simulated time) of /joint_states, actuator states, pose, "
-              "status, /clock", low=1.0, high=10000.0, read_only=False),
+    ParamSpec("publish_rate", 100.0, "rate (Hz of simulated time) of /joint_states, actuator states, pose, "
+              "status, /clock (joint states and status also follow every new command: publish_on_command)",
+              low=1.0, high=10000.0, read_only=False),
     ParamSpec("shape_rate", 30.0, "rate (Hz) of ~/shape (member polylines, shell triangles); 0 disables", low=0.0,
               high=1000.0, read_only=False),
     ParamSpec("publish_on_command", True, "also publish joint states and status right after the first step "
@@ -67,8 +68,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("step_margin", 4.0e-4, "realtime: a step without a waiting command starts this long before its "
               "deadline (s); a command starts its step at once", low=0.0, high=1.0),
     ParamSpec("cpu_affinity", "", "realtime: comma-separated CPU ids for the stepping thread ('' = any CPU)"),
-    ParamSpec("rt_priority", 0, "realtime: SCHED_FIFO priority of the stepping thread (1-99; 0 = the normal "
-              "scheduler); needs CAP_SYS_NICE or an rtprio limit, else a warning", low=0, high=99),
+    ParamSpec("rt_priority", -1, "realtime: SCHED_FIFO priority of the stepping thread (1-99; 0 = the normal "
+              "scheduler; -1 = 20 where the OS allows it, else the normal scheduler, said once at INFO level); an "
+              "explicit priority the OS refuses (no CAP_SYS_NICE or rtprio limit) gives a warning", low=-1, high=99),
     ParamSpec("diagnostics_rate", 1.0, "rate (Hz of wall time) of /diagnostics; 0 disables", low=0.0, high=100.0),
     ParamSpec("record", "", "record inputs and outputs to this rosbag2/MCAP directory ('' = none)"),
     ParamSpec("rrd", "", "log the twin to this rerun .rrd file ('' = none)"),
@@ -85,7 +87,7 @@ class NodeParams:
     mode: str = "realtime"
     dt: float = 0.0
     integrator: str = ""
-    publish_rate: float = 500.0
+    publish_rate: float = 100.0
     shape_rate: float = 30.0
     publish_on_command: bool = True
     command_source: str = "external"
@@ -104,7 +106,7 @@ class NodeParams:
     max_lag: float = 0.1
     step_margin: float = 4.0e-4
     cpu_affinity: str = ""
-    rt_priority: int = 0
+    rt_priority: int = -1
     diagnostics_rate: float = 1.0
     record: str = ""
     rrd: str = ""

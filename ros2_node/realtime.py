@@ -47,22 +47,31 @@ def _timer_slack(ns: int) -> bool:
         return False
 
 
-def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> list[str]:
-    """Pin the calling thread to ``cpus`` and give it SCHED_FIFO ``rt_priority`` (0: neither).
-    Returns the warnings for what the OS refused (no privilege, no such CPU)."""
-    warnings = []
+# SCHED_FIFO priority of rt_priority = -1 ("where the OS allows it"): above the normal threads,
+# well below the kernel's own real-time threads (50 and up on PREEMPT_RT kernels)
+AUTO_RT_PRIORITY = 20
+
+
+def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> tuple[list[str], list[str]]:
+    """Pin the calling thread to ``cpus`` and give it SCHED_FIFO ``rt_priority`` (0: normal
+    scheduling; −1: :data:`AUTO_RT_PRIORITY` if the OS allows it). Returns (warnings, notes): what
+    the OS refused of an explicit request, and what it refused of the automatic one."""
+    warnings, notes = [], []
     if cpus:
         try:
             os.sched_setaffinity(0, set(cpus))
         except (OSError, ValueError) as exc:
             warnings.append(f"cpu_affinity {list(cpus)} not applied ({exc}); the step thread runs on any CPU")
-    if rt_priority > 0:
+    if rt_priority != 0:
+        prio = AUTO_RT_PRIORITY if rt_priority < 0 else rt_priority
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            notes.append(f"stepping thread on SCHED_FIFO priority {prio}")
         except (OSError, AttributeError) as exc:
-            warnings.append(f"rt_priority {rt_priority} (SCHED_FIFO) not applied ({exc}): it needs CAP_SYS_NICE "
-                            "or an rtprio limit (ulimit -r); the step thread keeps the normal scheduler")
-    return warnings
+            text = (f"rt_priority {prio} (SCHED_FIFO) not applied ({exc}): it needs CAP_SYS_NICE or an rtprio "
+                    "limit (ulimit -r); the stepping thread keeps the normal scheduler")
+            (notes if rt_priority < 0 else warnings).append(text)
+    return warnings, notes
 
 
 @dataclass
@@ -104,7 +113,7 @@ class StepperConfig:
     duration: float = 0.0            # s of simulated time; 0: until stopped
     capacity: int = 256              # snapshot slots (the publisher may lag this many publications)
     cpu_affinity: tuple[int, ...] = ()
-    rt_priority: int = 0
+    rt_priority: int = -1
     window: int = 1000               # steps over which recent deadline misses are counted
 
 
@@ -174,7 +183,8 @@ class Stepper:
         self._miss_ring = np.zeros(config.window, dtype=np.int8)
         self._new_command = False
         self._cmd_recv_wall = 0.0
-        self.warnings: list[str] = []
+        self.warnings: list[str] = []        # what the OS refused of an explicit request
+        self.notes: list[str] = []           # how the stepping thread is scheduled
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._main, name="flexmb-step", daemon=True)
 
@@ -218,7 +228,10 @@ class Stepper:
     def _main(self) -> None:
         try:
             _timer_slack(1000)
-            self.warnings += apply_thread_scheduling(self.cfg.cpu_affinity, self.cfg.rt_priority)
+            if self.cfg.mode == "realtime":
+                warnings, notes = apply_thread_scheduling(self.cfg.cpu_affinity, self.cfg.rt_priority)
+                self.warnings += warnings
+                self.notes += notes
             self._ready.set()
             if self.cfg.mode == "lockstep":
                 self._loop_lockstep()
