@@ -198,6 +198,16 @@ def render(res: dict) -> str:
             "(`--every K` divides the latter by K) — costs more than the solve.",
             "",
         ]
+    pairs = _pairs(res["trials"])
+    if pairs:
+        lines += ["Speed-up per interleaved pair (1 worker, then 2; the load average is the 1-minute one "
+                  "before each trial, other sessions' work included):", "",
+                  "| pair | 1 worker (s) | 2 workers (s) | speed-up | load before the pair |", "|---|---|---|---|---|"]
+        lines += [f"| {i + 1} | {a['wall_s']:.2f} | {b['wall_s']:.2f} | {a['wall_s'] / b['wall_s']:.2f}× "
+                  f"| {a['load_before']:.2f} |" for i, (a, b) in enumerate(pairs)]
+        lines.append("")
+    if res.get("note"):
+        lines += [res["note"], ""]
     lines += [
         "Trials (in order):",
         "",
@@ -210,6 +220,11 @@ def render(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _pairs(trials: list[dict]) -> list[tuple[dict, dict]]:
+    """Consecutive (1 worker, 2 workers) trials."""
+    return [(a, b) for a, b in zip(trials, trials[1:]) if a["workers"] == 1 and b["workers"] == 2]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=32)
@@ -217,13 +232,16 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--reduced", default="", help="why this run is not the full benchmark (printed in sweep.md)")
+    ap.add_argument("--note", default="", help="a paragraph for sweep.md (kept in sweep.json)")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--render-only", action="store_true")
     args = ap.parse_args()
     js = args.out / "sweep.json"
     res = json.loads(js.read_text()) if args.render_only else run(args)
     args.out.mkdir(parents=True, exist_ok=True)
-    if not args.render_only:
+    if args.note:
+        res["note"] = args.note
+    if args.note or not args.render_only:
         js.write_text(json.dumps(res, indent=1) + "\n")
     (args.out / "sweep.md").write_text(render(res))
     for n, m in res["median"].items():
