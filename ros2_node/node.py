@@ -30,6 +30,7 @@ import dataclasses
 import gc
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -178,6 +179,10 @@ class TwinNode:
         self._reporter = TwinReporter(self.model)
         self._view = _SnapshotView(self.model, Workspace(self.model))
         self._view.last = self.runner.sim.last
+        # ... and the executor's, for the answers to commands whose step it ran (Stepper.submit)
+        self._answer_reporter = TwinReporter(self.model)
+        self._answer_view = _SnapshotView(self.model, Workspace(self.model))
+        self._answer_live = LiveMessages(self.runner.sample())
         self._shells = ShellShapes(self.model)
         self._member_kinds = self.runner.member_kinds
 
@@ -245,7 +250,26 @@ class TwinNode:
         self._callbacks += 1
         self._last_command_wall = t_recv
         d = to_dict(msg) if self.recorder is not None else msg
-        self.stepper.submit(topic.resolved(self.node_name), kind, d, t_recv, topic)
+        snap = self.stepper.submit(topic.resolved(self.node_name), kind, d, t_recv, topic)
+        if snap is not None and snap.answered:
+            self._answer(snap)
+
+    def _answer(self, snap: Snapshot) -> None:
+        """The answer to a command whose step ran on this (the executor's) thread: status (the
+        acknowledgement, echoing its stamp) and joint states, at once. Its own reporter and
+        messages: the publisher thread's are not touched. The publisher records the snapshot."""
+        view = self._answer_view
+        view.state, view.last = snap.state, snap.result
+        s = self._answer_reporter.read(view, False)
+        if not s.is_finite():
+            return                       # the publisher thread warns of it when it records it
+        self._latency = time.perf_counter() - snap.cmd_recv_wall
+        self._latencies.add(self._latency)
+        live, t = self._answer_live, s.t
+        if self._listened.get(T.STATUS.name, True):
+            self._pub[T.STATUS.name].publish(live.fill_status(s, self._timing(snap, snap.message)))
+        if self._listened.get(T.JOINT_STATES.name, True):
+            self._pub[T.JOINT_STATES.name].publish(live.fill_joint_state(s))
 
     # -- outputs (publisher thread) ------------------------------------------------------------------------
     def _wake_publisher(self) -> None:
@@ -306,15 +330,20 @@ class TwinNode:
             return
         live = self.live
         message = snap.message
-        if snap.on_command:         # the state that answers a command: its latency, measured here
+        answer = snap.on_command and not snap.answered
+        if answer:                  # the state that answers a command: its latency, measured here
             self._latency = time.perf_counter() - snap.cmd_recv_wall
             self._latencies.add(self._latency)
+        # a snapshot answered on the command's thread is only recorded here (unless also due)
+        live_now = self._live
+        self._live = live_now and (snap.due or answer or snap.ack)
         if snap.due or snap.on_command or snap.ack:
             # the status first: it echoes the command's stamp, the acknowledgement clients wait for
             timing = self._timing(snap, message)
             self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing), t)
         if snap.due or snap.on_command:
             self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s), t)
+        self._live = live_now
         if snap.due:
             self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s), t)
             for i, topic in enumerate(self._pose_topics):
@@ -473,7 +502,7 @@ class TwinNode:
         # The stepping thread needs the GIL for the few Python lines around its numba call: let
         # another thread keep it at most this long (default 5 ms, five steps at 1 kHz).
         switch = sys.getswitchinterval()
-        sys.setswitchinterval(_SWITCH_INTERVAL)
+        sys.setswitchinterval(float(os.environ.get("FLEXMB_SWITCH_INTERVAL", _SWITCH_INTERVAL)))
         publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
         self.wall_start = time.perf_counter()
         self._cpu_start = time.process_time()

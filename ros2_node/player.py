@@ -205,8 +205,9 @@ class Player:
         if ref is None:
             return
         t = M.stamp_seconds(msg.header.stamp) - self.t0
-        if t < 0.0:
-            return                           # before playback: the twin holds its start pose
+        if t < 0.0 or t > self.until:
+            return                           # before playback the twin holds its start pose, after it
+            #                                  it stops (command timeout): the law is not played there
         p_ref, q_ref = ref(t)
         p = msg.pose.position
         o = msg.pose.orientation

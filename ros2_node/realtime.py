@@ -10,11 +10,11 @@ other, so a command applied while the twin is at ``t_n`` acts on the step ``t_n 
 — the time it is recorded with, which a replay re-applies it at.
 
 Pacing (``realtime``). State ``n`` stands for the wall time ``t0 + nΔt``. The step to state
-``n + 1`` must end by its deadline ``t0 + (n+1)Δt`` and may start from ``t0 + nΔt`` on (the twin
-is at most one step ahead of the wall clock). It starts at once when a command is waiting — so a
-command is answered within one step's compute time instead of waiting for the next tick — and
-otherwise at the latest safe moment, ``margin`` before its deadline, so that a command arriving
-late in the period still makes the step. A step that ends after its deadline is a deadline miss;
+``n + 1`` must end by its deadline ``t0 + (n+1)Δt``. Without a command it starts at the latest
+safe moment, ``margin`` before its deadline; a command starts it at once — on the thread that
+received the command — as long as the twin is then at most :data:`COMMAND_LEAD` steps ahead of the
+wall clock, so a command is answered within one step's compute time instead of waiting for the
+next tick. A step that ends after its deadline is a deadline miss;
 one that ends more than ``max_lag`` late re-anchors the clock (an overrun) instead of bursting.
 ``lockstep``: one step per command, as soon as it arrives.
 """
@@ -36,6 +36,10 @@ from flexmb_core.model.workspace import State
 from .twin import TwinRunner, apply_message
 
 _PR_SET_TIMERSLACK = 29
+# steps a command-triggered step may put the twin ahead of the wall clock: an idle step runs late in
+# its period (step_margin before the deadline), so a command arriving after it would otherwise wait
+# for the next period; with 2 it is answered at once and the idle steps wait for the clock instead
+COMMAND_LEAD = 2
 
 
 def _timer_slack(ns: int) -> bool:
@@ -92,6 +96,7 @@ class Snapshot:
     shape_due: bool = False
     on_command: bool = False         # first step that used a new command
     ack: bool = False                # lockstep: the acknowledgement of one command
+    answered: bool = False           # the command's thread published the answer (status, joint states)
     cmd_recv_wall: float = 0.0       # perf_counter at the reception of the command it answers
     steps: int = 0
     failed_steps: int = 0
@@ -172,6 +177,9 @@ class Stepper:
         self._pending = 0                     # commands applied since the last step began
         self.wake = threading.Event()
         self._ready = threading.Event()
+        self._t0 = 0.0                        # wall time of state 0 (perf_counter; re-anchored on overruns)
+        self._n = 0                           # states since t0
+        self._running = False                 # the realtime loop has set t0
         self.stop_event = threading.Event()
         self.finished = threading.Event()
         st = runner.sim.state
@@ -201,11 +209,18 @@ class Stepper:
         self.wake.set()
         self._thread.join(timeout)
 
-    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None) -> None:
+    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None) -> Snapshot | None:
         """A command message arrived (any thread): validate and apply it at the twin's current
-        time, queue its event (``tag`` comes back with it in :attr:`outbox`) and wake the stepping
-        thread, which starts the step that uses it at once (realtime: if the twin is not a step
-        ahead already; lockstep: one step per message)."""
+        time and queue its event (``tag`` comes back with it in :attr:`outbox`).
+
+        Realtime: when the twin is not a step ahead of the wall clock, the step that uses the
+        command runs right here, on the receiving thread — a command's whole path (apply, step,
+        answer) then crosses no thread, which at 1 kHz costs less than waking the stepping thread
+        and the publisher for each command — and its snapshot is returned: the caller answers it
+        (it is queued as already answered: the publisher records it and publishes only what else
+        is due). Otherwise (the twin is ahead, or lockstep) the stepping thread is woken for it
+        and None is returned."""
+        snap = None
         with self._lock:
             t_applied = self.runner.t
             try:
@@ -217,8 +232,14 @@ class Stepper:
                 self._cmd_recv_wall = recv_wall
             self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
             self._pending += 1
-        self.wake.set()
+            if (self.cfg.mode == "realtime" and self._running and not self._done()
+                    and time.perf_counter() >= self._t0 + (self._n + 1 - COMMAND_LEAD) * self.dt):
+                self._pending = 0
+                snap = self._step_paced(answered=True)
+        if snap is None:
+            self.wake.set()
         self._notify()
+        return snap
 
     @property
     def alive(self) -> bool:
@@ -251,14 +272,16 @@ class Stepper:
     def _loop_realtime(self) -> None:
         dt, margin = self.dt, self.cfg.margin
         wake, clock, lock = self.wake, time.perf_counter, self._lock
-        t0 = clock()
-        n = 0
+        with lock:
+            self._t0 = clock()
+            self._n = 0
+            self._running = True
         while not self._done():
-            earliest = t0 + n * dt
-            deadline = earliest + dt
-            latest = deadline - margin
             while True:
                 wake.clear()
+                n = self._n            # a command may have taken this step on its own thread
+                earliest = self._t0 + (n + 1 - COMMAND_LEAD) * dt       # for a waiting command
+                latest = self._t0 + (n + 1) * dt - margin
                 now = clock()
                 pending = self._pending
                 if now >= latest or (pending and now >= earliest):
@@ -267,12 +290,20 @@ class Stepper:
                     return
                 wake.wait((earliest if pending else latest) - now)
             with lock:
-                self._pending = 0
-                end = self._step(deadline)
-            n += 1
-            if end - deadline > self.cfg.max_lag:    # far behind: re-anchor instead of bursting
-                self.stats.overruns += 1
-                t0 = end - n * dt
+                if self._n == n and not self._done():     # else a command's thread stepped meanwhile
+                    self._pending = 0
+                    self._step_paced(answered=False)
+
+    def _step_paced(self, answered: bool) -> Snapshot | None:
+        """The step to state n + 1 against its deadline t0 + (n+1)Δt (under the lock); re-anchors
+        the schedule when far behind. Returns the snapshot it queued, if any."""
+        deadline = self._t0 + (self._n + 1) * self.dt
+        end, snap = self._step(deadline, answered=answered)
+        self._n += 1
+        if end - deadline > self.cfg.max_lag:    # far behind: re-anchor instead of bursting
+            self.stats.overruns += 1
+            self._t0 = end - self._n * self.dt
+        return snap
 
     def _loop_lockstep(self) -> None:
         while not self._done():
@@ -283,10 +314,13 @@ class Stepper:
             with self._lock:
                 self._pending -= 1
                 self._step(math.inf, ack=True)
+                self._n += 1
 
     # -- one step ----------------------------------------------------------------------------------
-    def _step(self, deadline: float, ack: bool = False) -> float:
-        """One step, its timing, and a snapshot when something is due; returns its end (perf_counter)."""
+    def _step(self, deadline: float, ack: bool = False, answered: bool = False) -> tuple[float, Snapshot | None]:
+        """One step, its timing, and a snapshot when something is due; returns its end
+        (perf_counter) and the snapshot queued, if any. ``answered``: the caller publishes the
+        answer to the command itself (see :meth:`submit`)."""
         runner, cfg = self.runner, self.cfg
         a = time.perf_counter()
         outcome = runner.step()
@@ -310,13 +344,16 @@ class Stepper:
         due = k % cfg.publish_every == 0 or not outcome.advanced
         shape_due = bool(cfg.shape_every) and k % cfg.shape_every == 0
         message = outcome.message if (not outcome.converged or outcome.message) else ""
+        snap = None
         if due or on_command or shape_due or ack:
-            self._snapshot(runner.sim.last, outcome.advanced, message, wall, late, due, shape_due, on_command, ack)
+            snap = self._snapshot(runner.sim.last, outcome.advanced, message, wall, late, due, shape_due, on_command,
+                                  ack, answered and on_command)
             if on_command:
                 self._new_command = False
-        return b
+        return b, snap
 
-    def _snapshot(self, result, advanced, message, wall, late, due, shape_due, on_command, ack) -> None:
+    def _snapshot(self, result, advanced, message, wall, late, due, shape_due, on_command, ack,
+                  answered: bool = False) -> Snapshot:
         runner = self.runner
         i = self._seq % len(self.slots)
         s = self.slots[i]
@@ -326,9 +363,12 @@ class Stepper:
         s.step_wall, s.end_wall, s.lateness = wall, time.perf_counter(), late
         s.due, s.shape_due, s.on_command, s.ack = due, shape_due, on_command, ack
         s.cmd_recv_wall = self._cmd_recv_wall if on_command else 0.0
+        s.answered = answered
         c = runner.counters
         s.steps, s.failed_steps, s.flagged_steps = c.steps, c.failed_steps, c.flagged_steps
         s.rejected, s.newest_stamp = runner.rejected_commands, runner.newest_command_stamp
         self.outbox.append(("out", i, self._seq))
         self._seq += 1
-        self._notify()
+        if not answered:        # the answering thread notifies once it is done (submit)
+            self._notify()
+        return s

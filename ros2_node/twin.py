@@ -136,6 +136,8 @@ class TwinRunner:
                                             dt=self.dt, max_rate=max_rate,
                                             max_points=int(o.max_trajectory_points))
             self.sim.set_commands(rest)
+        if warmup and self.schedule is not None:
+            self.schedule.warmup()
         self.sim.initialize()
         self._backup = self.sim.state.copy()
         return self.sample()
