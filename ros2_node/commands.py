@@ -656,10 +656,11 @@ class CommandSchedule:
     def _stopping(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Lengths and rates at ``t`` of the commands stopping from the timeout on (uniform
         deceleration over :data:`TIMEOUT_STOP`), and where they come to rest."""
-        ts = min(max(t - self._t_hold, 0.0), TIMEOUT_STOP)
+        # a ramp to rest must be over after ramp_time: the stop takes no longer than the ramp
+        stop = TIMEOUT_STOP if self.behaviour == "hold" else min(TIMEOUT_STOP, self.ramp_time)
+        ts = min(max(t - self._t_hold, 0.0), stop)
         v = self._held_v
-        return (self._held + v * (ts - ts * ts / (2.0 * TIMEOUT_STOP)), v * (1.0 - ts / TIMEOUT_STOP),
-                self._held + 0.5 * TIMEOUT_STOP * v)
+        return (self._held + v * (ts - ts * ts / (2.0 * stop)), v * (1.0 - ts / stop), self._held + 0.5 * stop * v)
 
     def _held_value(self, t: float) -> np.ndarray:
         """After the timeout: the commands stop smoothly (``hold``), then (``ramp_to_rest``) ramp

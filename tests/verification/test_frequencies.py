@@ -59,7 +59,11 @@ def test_eigenvalue_convergence_rate_is_2p(order, meshes):
     """Error of the 3rd bending frequency against a 64-element solution of the same order;
     Galerkin eigenvalue errors converge as h^(2p)."""
     length = 0.3
-    ref = z_bending_frequencies(length, 64, order)[2]
-    errs = [abs(z_bending_frequencies(length, n, order)[2] / ref - 1) for n in meshes]
+    # the 3rd bending frequency picked as the one nearest the Timoshenko value, not by its index:
+    # a mode of a (nearly) degenerate pair elsewhere in the spectrum may come out mixed, with enough
+    # z-motion to pass the bending filter, depending on round-off (seen at 16 quadratic elements)
+    guess = timoshenko_cantilever_frequencies(E, G, KS, B * H, B * H**3 / 12, RHO, length, 3)[2:]
+    ref = nearest(z_bending_frequencies(length, 64, order), guess)[0]
+    errs = [abs(nearest(z_bending_frequencies(length, n, order), [ref])[0] / ref - 1) for n in meshes]
     rate = np.polyfit(np.log(1.0 / np.asarray(meshes)), np.log(errs), 1)[0]
     assert abs(rate - 2 * order) < 0.6, f"observed rate {rate:.2f}, expected {2 * order}"
