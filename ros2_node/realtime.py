@@ -1,13 +1,14 @@
 """The twin's time loop on a thread of its own (no ROS here: the node wires it to rclpy).
 
-:class:`Stepper` runs the :class:`~ros2_node.twin.TwinRunner`'s steps: it calls the numba step
-(which releases the GIL, so the executor and the publisher run meanwhile) and copies what the
-publisher needs into a preallocated ring of :class:`Snapshot` slots. Nothing in the loop builds a
-message or writes a file; the publisher thread turns due snapshots into messages. Commands are
-validated and applied by the thread that receives them (:meth:`Stepper.submit`, the executor), so
-their Python stays off the stepping thread; one lock makes a command and a step exclude each
-other, so a command applied while the twin is at ``t_n`` acts on the step ``t_n → t_n + Δt``
-— the time it is recorded with, which a replay re-applies it at.
+:class:`Stepper` keeps the :class:`~ros2_node.twin.TwinRunner`'s time: its thread runs the steps
+no command asked for, calling the numba step (which releases the GIL, so the executor and the
+publisher run meanwhile), and copies what the publisher needs into a preallocated ring of
+:class:`Snapshot` slots. Nothing in the loop builds a message or writes a file; the publisher
+thread turns due snapshots into messages. Commands are validated and applied by the thread that
+receives them (:meth:`Stepper.submit`, the executor), which also runs the step that uses them when
+the pacing allows; one lock makes a command and a step exclude each other, so a command applied
+while the twin is at ``t_n`` acts on the step ``t_n → t_n + Δt`` — the time it is recorded with,
+which a replay re-applies it at.
 
 Pacing (``realtime``). State ``n`` stands for the wall time ``t0 + nΔt``. The step to state
 ``n + 1`` must end by its deadline ``t0 + (n+1)Δt``. Without a command it starts at the latest
@@ -124,7 +125,8 @@ class StepperConfig:
 
 @dataclass
 class StepperStats:
-    """Counters the publisher reads (written by the stepping thread only)."""
+    """Counters the publisher reads (written under the stepper's lock, by whichever thread steps;
+    ``dropped_snapshots`` by the publisher)."""
 
     steps_advanced: int = 0
     deadline_misses: int = 0
@@ -160,9 +162,10 @@ class Stepper:
 
     Parameters
     ----------
-    runner : a started :class:`TwinRunner`; the stepper owns it from :meth:`start` on.
+    runner : a started :class:`TwinRunner`; from :meth:`start` on it is touched only under the
+        stepper's lock (:meth:`submit` and the stepping thread).
     config : pacing and publication decimation.
-    notify : called (from the stepping thread) after a snapshot or command event is queued.
+    notify : called (from the thread that queued it) after a snapshot or command event is queued.
     """
 
     def __init__(self, runner: TwinRunner, config: StepperConfig, notify):
