@@ -39,13 +39,12 @@ def _spin_tumble(model, sim):
             v[b] = np.cross(omega, q[b])
 
 
-def _history(d, fast, steps, setup=None):
-    model, sim = build(copy.deepcopy(d))
+def _steps(sim, fast, steps):
+    """Run ``steps`` steps with the numba step (``fast``) or the Python path: every result's
+    fields, the final state (with the actuator stretches and rates) and the tangent refreshes."""
     assert sim._dynamic.fast is not None
     if not fast:
         sim._dynamic.fast = None
-    if setup:
-        setup(model, sim)
     sim.initialize()
     rows = []
     for _ in range(steps):
@@ -53,7 +52,14 @@ def _history(d, fast, steps, setup=None):
         rows.append((r.converged, r.iterations, r.residual, r.increment, r.substeps, r.kinetic, r.strain,
                      r.gravity, r.message, r.guard))
     s = sim.state
-    return rows, np.concatenate((s.q, s.v, s.a, s.atil)), sim._dynamic.tangent_updates
+    return rows, np.concatenate((s.q, s.v, s.a, s.atil, s.lam, s.lam_rate)), sim._dynamic.tangent_updates
+
+
+def _history(d, fast, steps, setup=None):
+    model, sim = build(copy.deepcopy(d))
+    if setup:
+        setup(model, sim)
+    return _steps(sim, fast, steps)
 
 
 @pytest.mark.parametrize("d", [_b1(), _b1("full"), _b1(integrator="newmark"), _b1(gravity=True)],
@@ -98,18 +104,8 @@ def _scene_history(path, fast, steps):
     from flexmb_core.simulator import Simulator
 
     sim = Simulator(compile_scene(load_scene(path)))
-    assert sim._dynamic.fast is not None
-    if not fast:
-        sim._dynamic.fast = None
     sim.warmup()
-    sim.initialize()
-    rows = []
-    for _ in range(steps):
-        r = sim.step()
-        rows.append((r.converged, r.iterations, r.residual, r.increment, r.substeps, r.kinetic, r.strain,
-                     r.gravity, r.message, r.guard))
-    s = sim.state
-    return rows, np.concatenate((s.q, s.v, s.a, s.atil, s.lam, s.lam_rate)), sim._dynamic.tangent_updates
+    return _steps(sim, fast, steps)
 
 
 @pytest.mark.parametrize("scene, steps", [
