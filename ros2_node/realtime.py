@@ -41,6 +41,11 @@ _PR_SET_TIMERSLACK = 29
 # its period (step_margin before the deadline), so a command arriving after it would otherwise wait
 # for the next period; with 2 it is answered at once and the idle steps wait for the clock instead
 COMMAND_LEAD = 2
+# s the stepping thread blocks before each step while it is behind the wall clock: a twin that
+# cannot keep up (and on SCHED_FIFO would never leave its core) still lets the executor, the
+# publisher and the rest of the machine run (measured: a 50 kHz overloaded twin starved DDS
+# discovery of a client on the 2-core machine)
+BEHIND_PAUSE = 1.0e-4
 
 
 def _timer_slack(ns: int) -> bool:
@@ -292,6 +297,8 @@ class Stepper:
                 if self.stop_event.is_set():
                     return
                 wake.wait((earliest if pending else latest) - now)
+            if now >= latest + margin:        # behind: the deadline has passed already
+                wake.wait(BEHIND_PAUSE)
             with lock:
                 if self._n == n and not self._done():     # else a command's thread stepped meanwhile
                     self._pending = 0

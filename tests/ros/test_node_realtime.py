@@ -25,7 +25,7 @@ def test_an_overloaded_twin_reports_that_it_is_behind(tmp_path, dds_env):
     cannot keep 50 kHz, so every window of steps misses deadlines. The node must log it, put the reason in status.message and
     raise the deadlines entry of /diagnostics to WARN."""
     summary = tmp_path / "s.json"
-    node = NodeProcess([SCENE, "--mode", "realtime", "--dt", "2e-5", "--duration", "1.0", "--publish-rate", "2000",
+    node = NodeProcess([SCENE, "--mode", "realtime", "--dt", "2e-5", "--duration", "1.2", "--publish-rate", "2000",
                         "--diagnostics-rate", "5", "--summary-json", str(summary), "--quiet"], dds_env,
                        tmp_path / "node.log")
     client = TwinClient()
@@ -43,7 +43,7 @@ def test_an_overloaded_twin_reports_that_it_is_behind(tmp_path, dds_env):
     log = node.log_path.read_text()
     assert "behind real time:" in log and "missed their deadline" in log, log[-2000:]
     s = json.loads(summary.read_text())
-    assert s["deadline_misses"] > 0 and s["steps"] == 50000
+    assert s["deadline_misses"] > 0 and s["steps"] == 60000
     diag = [st for d in client.received[T.DIAGNOSTICS.name] for st in d.status]
     names = {st.name for st in diag}
     assert {"flexmb_twin: solver", "flexmb_twin: deadlines", "flexmb_twin: commands"} <= names
