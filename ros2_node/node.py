@@ -30,7 +30,6 @@ import dataclasses
 import gc
 import json
 import math
-import os
 import signal
 import sys
 import threading
@@ -265,7 +264,9 @@ class TwinNode:
             return                       # the publisher thread warns of it when it records it
         self._latency = time.perf_counter() - snap.cmd_recv_wall
         self._latencies.add(self._latency)
-        live, t = self._answer_live, s.t
+        # the publisher has not seen this command's event yet: its age counts from now on
+        self._accepted_wall = max(self._accepted_wall, snap.cmd_recv_wall)
+        live = self._answer_live
         if self._listened.get(T.STATUS.name, True):
             self._pub[T.STATUS.name].publish(live.fill_status(s, self._timing(snap, snap.message)))
         if self._listened.get(T.JOINT_STATES.name, True):
@@ -305,12 +306,12 @@ class TwinNode:
 
     def _on_command_event(self, topic_name: str, kind: str, d, t_applied: float, rejection,
                           recv_wall: float, topic: T.Topic) -> None:
-        """A command the stepping thread applied at simulated time ``t_applied``: record it with
-        that log time (what a replay re-applies before the same step) and warn of a rejection."""
+        """A command applied at simulated time ``t_applied``: record it with that log time (what a
+        replay re-applies before the same step) and warn of a rejection."""
         if self.recorder is not None:
             self.recorder.write(topic_name, topic.type, d, t_applied)
         if rejection is None:
-            self._accepted_wall = recv_wall
+            self._accepted_wall = max(self._accepted_wall, recv_wall)
         elif isinstance(rejection, str):
             self._warn(f"{topic_name}:error", rejection)
         else:
@@ -502,7 +503,7 @@ class TwinNode:
         # The stepping thread needs the GIL for the few Python lines around its numba call: let
         # another thread keep it at most this long (default 5 ms, five steps at 1 kHz).
         switch = sys.getswitchinterval()
-        sys.setswitchinterval(float(os.environ.get("FLEXMB_SWITCH_INTERVAL", _SWITCH_INTERVAL)))
+        sys.setswitchinterval(_SWITCH_INTERVAL)
         publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
         self.wall_start = time.perf_counter()
         self._cpu_start = time.process_time()
