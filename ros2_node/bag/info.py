@@ -24,10 +24,14 @@ def bag_info(path) -> dict:
     if meta_dir is not None and (meta_dir / rosbag2.METADATA_FILE).is_file():
         try:
             meta = rosbag2.read(meta_dir)
+            # a topic declared up front (the node declares every topic it may record) and never
+            # written is listed with 0 messages but has none in the file: compare the written ones
             listed = {t["topic_metadata"]["name"]: int(t["message_count"])
-                      for t in meta.get("topics_with_message_count", [])}
-            out["metadata_yaml"] = {"message_count": int(meta.get("message_count", 0)),
-                                    "agrees": listed == {t: c for t, c in counts.items()}}
+                      for t in meta.get("topics_with_message_count", []) if int(t["message_count"])}
+            total = int(meta.get("message_count", 0))
+            out["metadata_yaml"] = {"message_count": total,
+                                    "agrees": listed == {t: c for t, c in counts.items() if c}
+                                    and total == sum(counts.values())}
         except (ValueError, KeyError, TypeError) as exc:
             out["metadata_yaml"] = {"error": str(exc)}
     return out

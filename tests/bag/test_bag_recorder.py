@@ -177,3 +177,17 @@ def test_reader_rejects_what_is_not_a_bag(tmp_path):
     with pytest.raises(BagError, match="expected one .mcap file"):
         BagReader(tmp_path / "empty")
     assert MAGIC == b"\x89MCAP0\r\n"
+
+
+def test_bag_info_agrees_with_a_clean_bag_that_declared_an_unused_topic(tmp_path):
+    """The node declares every topic it may record; one never written (a command topic nobody
+    used) is listed in metadata.yaml with 0 messages and must not make `bag info` cry 'DIFFERS'."""
+    from ros2_node.bag.info import bag_info, format_info
+
+    out = tmp_path / "bag"
+    rec = _record(out, n=100)
+    rec.declare("/flexmb_twin/commands", "std_msgs/msg/Float64MultiArray")
+    rec.close()
+    info = bag_info(out)
+    assert info["metadata_yaml"] == {"message_count": 110, "agrees": True}
+    assert "agrees with the file" in format_info(info)
