@@ -203,6 +203,28 @@ class DynamicIntegrator:
             self.guard.ledger_restore()
         return res
 
+    def set_stretches(self, state: State, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None) -> bool:
+        """λ_{n+1} into ``state.lam`` and, for damped models, its rate λ̇_{n+1} into
+        ``state.lam_rate`` (given, or the backward difference over the stretch history); λ_n is
+        kept as the history's candidate. Returns whether any actuator moves in the step."""
+        if self._damped:
+            if lam_rate is None:
+                t_n = state.t
+                h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
+                stretch_rate(lam_new, state.lam, self._lam_hist, dt, h0, state.lam_rate)
+            else:
+                state.lam_rate[:] = lam_rate
+            self._lam_cand[:] = state.lam
+        moved = lam_new.size > 0 and bool(np.any(lam_new != state.lam))
+        state.lam[:] = lam_new
+        return moved
+
+    def accept_stretches(self, t_n: float, t_new: float) -> None:
+        """The step t_n → t_new was accepted: λ_n joins the stretch history (damped models)."""
+        if self._damped:
+            self._lam_hist[:] = self._lam_cand
+            self._t_prev, self._t_hist = t_n, t_new
+
     def _piece(self, state: State, dt: float, lam_new: np.ndarray, k: int) -> StepResult:
         """Sub-step ``k`` of a split step (each split starts again from the step's start)."""
         if k == 1:
@@ -230,15 +252,7 @@ class DynamicIntegrator:
         t_new = state.t + dt
         damped = self._damped
         t_n = state.t
-        if damped:
-            if lam_rate is None:
-                h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
-                stretch_rate(lam_new, state.lam, self._lam_hist, dt, h0, state.lam_rate)
-            else:
-                state.lam_rate[:] = lam_rate
-            self._lam_cand[:] = state.lam
-        lam_moved = lam_new.size > 0 and bool(np.any(lam_new != state.lam))
-        state.lam[:] = lam_new
+        lam_moved = self.set_stretches(state, dt, lam_new, lam_rate)
         ch = spec.integrator == "chung_hulbert"
         if ch and m.n_multipliers:
             raise ValueError("the chung_hulbert integrator does not support rigid corners (multipliers)")
@@ -343,9 +357,7 @@ class DynamicIntegrator:
                 return StepResult(False, it, rel, inc, 1, kin, strain, grav, message=message, guard=guard)
             return StepResult(False, it, rel, inc, 1, message=message)
         self._tangent_age += 1
-        if damped:
-            self._lam_hist[:] = self._lam_cand
-            self._t_prev, self._t_hist = t_n, t_new
+        self.accept_stretches(t_n, t_new)
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
         if guarded:

@@ -35,7 +35,7 @@ from ..signals import evaluate
 from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies
-from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
+from .fused import apply_increment, inertial_residual, update_rates, velocity_at
 
 # Return codes of frame_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
@@ -544,18 +544,10 @@ class FastFrameStep:
         guard = integ.guard
         t_n = state.t
         lam = state.lam
-        balance = True
-        if lam.size:                    # the stretches as DynamicIntegrator._newton sets them
+        if lam.size:                    # the step's start, restored if the attempt fails
             self._lam_n[:] = lam
             self._rate_n[:] = state.lam_rate
-            if integ._damped:
-                if lam_rate is None:
-                    h0 = t_n - integ._t_prev if t_n == integ._t_hist else 0.0
-                    stretch_rate(lam_new, lam, integ._lam_hist, dt, h0, state.lam_rate)
-                else:
-                    state.lam_rate[:] = lam_rate
-            balance = not bool(np.any(lam_new != lam))
-            lam[:] = lam_new
+        balance = not integ.set_stretches(state, dt, lam_new, lam_rate)
         rates = state.lam_rate if integ._damped else self._zero_rate
         self.loads(t_n + dt)
         f_ext, r, env, inv_diag, stats = self._shared
@@ -570,9 +562,7 @@ class FastFrameStep:
         integ.ws.dissipation = self._io[IO_DISS]
         if code == OK:
             state.t = t_n + dt
-            if integ._damped and lam.size:      # the stretch history of the backward difference
-                integ._lam_hist[:] = self._lam_n
-                integ._t_prev, integ._t_hist = t_n, t_n + dt
+            integ.accept_stretches(t_n, t_n + dt)
             return StepResult(True, int(it), rel, inc, 1, kin, strain, grav)
         if lam.size:                    # the step's start, for the integrator's policy
             lam[:] = self._lam_n
