@@ -1,6 +1,6 @@
 """Studies over many runs of a scene: parameter sweeps (``flexmb sweep``) on Dask distributed.
 
-``design`` (which values each run gets), ``runs`` (a run's effective scene, key and task),
+``cluster`` (the Dask client every study verb uses), ``design`` (which values each run gets), ``runs`` (a run's effective scene, key and task),
 ``table`` (run files and the sweep table), ``plot``, ``progress`` and ``sweep`` (the verb).
 Importing this package imports neither Dask nor matplotlib.
 """

@@ -18,24 +18,18 @@ Dask is imported inside :func:`execute` only: the rest of flexmb works without i
 from __future__ import annotations
 
 import json
-import logging
-import os
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 from ..errors import FlexmbError, SceneError
+from .cluster import connect, default_workers
 from .design import Param, design, parse_param
 from .runs import RunSpec, make_spec, run_one
 from .table import flat_record, load_run, save_run, write_csv, write_parquet
 
 DEFAULT_OUT = "build/sweep"
-
-
-class ClusterError(FlexmbError):
-    """Dask is missing or the scheduler cannot be reached."""
 
 
 @dataclass
@@ -108,47 +102,6 @@ def plan(scene_path: str | Path, param_items: list[str], *, samples: int | None 
     outs = tuple(outputs) if outputs else None
     specs = [make_spec(base, pt, source=str(path), until=until, outputs=outs, every=every) for pt in points]
     return params, specs
-
-
-def default_workers() -> int:
-    """One worker process per core this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:                      # not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-@contextmanager
-def connect(scheduler: Any = None, workers: int | None = None):
-    """A ``dask.distributed.Client``: the given one, one connected to ``scheduler`` (an address),
-    or one on a new ``LocalCluster`` of ``workers`` processes bound to 127.0.0.1."""
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise ClusterError("flexmb sweep runs on Dask distributed: install the extra [cluster] "
-                           "(pip install 'flexmb[cluster]', or dask and distributed)") from None
-    if isinstance(scheduler, Client):
-        yield scheduler
-        return
-    if scheduler:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise ClusterError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                           worker_dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
-    client = Client(cluster)
-    try:
-        yield client
-    finally:
-        client.close()
-        cluster.close()
 
 
 def _lost(spec: RunSpec, exc: BaseException) -> dict:
