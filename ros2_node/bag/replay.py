@@ -31,11 +31,11 @@ from flexmb_core.scene.overrides import apply_overrides
 
 from .. import topics as T
 from .compare import Comparison, FieldStat
+from .lockstep import input_kinds, run_lockstep
 from .reader import BagReader
 from .tolerances import RELATIVE, REPORT_UNITS, parse_tolerances
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_DEVIATION = 0, 1, 3
-_MAX_FAILED_STEPS = 10          # consecutive replay steps that do not advance before giving up
 
 _OUTPUT_TYPES = {"sensor_msgs/msg/JointState", "flexmb_msgs/msg/ActuatorState", "geometry_msgs/msg/PoseStamped",
                  "tf2_msgs/msg/TFMessage", "visualization_msgs/msg/MarkerArray", "flexmb_msgs/msg/TwinStatus",
@@ -202,11 +202,6 @@ class ReplayReport:
         return "\n".join(lines)
 
 
-def _input_kinds(node_name: str) -> dict[str, str]:
-    return {T.COMMANDS.resolved(node_name): "commands", T.ACTUATOR_COMMANDS.resolved(node_name): "actuator_commands",
-            T.TRAJECTORY.resolved(node_name): "joint_trajectory"}
-
-
 def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str | None = None,
            overrides: list[str] | None = None) -> ReplayReport:
     """Replay ``bag`` and compare (see the module docstring).
@@ -228,7 +223,7 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
         On bad input.
     """
     from .tolerances import ToleranceError
-    from ..twin import TwinRunner, apply_message
+    from ..twin import TwinRunner
 
     try:
         tol = (parse_tolerances(None, tolerances) if isinstance(tolerances, dict)
@@ -240,7 +235,7 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
     runner = TwinRunner(twin.model, options=twin.options)
     if runner.sim.spec.analysis != "dynamic":
         raise ReplayError(f"{bag}: scene analysis '{runner.sim.spec.analysis}' cannot be replayed")
-    kinds = _input_kinds(twin.node_name)
+    kinds = input_kinds(twin.node_name)
     pose_index = {T.pose_topic(o.name, i).resolved(twin.node_name): i
                   for i, o in enumerate(o for o in twin.scene.outputs if o.kind == "platform_pose")}
 
@@ -289,43 +284,17 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
                 if c.sec * 1_000_000_000 + c.nanosec != ns:
                     cmp.mismatch(f"{topic}: clock {c.sec}.{c.nanosec:09d} logged at {ns} ns")
 
+    def at(ns: int) -> bool:
+        compare_at(ns)
+        return bool(outputs)
+
     wall0 = time.perf_counter()
     runner.start()
-    dt = runner.dt
-    until = twin.until
-    i, failed_in_a_row = 0, 0
-    compare_at(_ns(runner.t))
-    while True:
-        t = runner.t
-        t_ns = _ns(t)
-        while i < len(commands) and commands[i][0] <= t_ns:
-            _, topic, kind, msg = commands[i]
-            i += 1
-            r = apply_message(runner, kind, topic, msg)
-            report.commands_applied += 1
-            if r is not None:
-                report.commands_rejected += 1
-                if len(report.rejections) < 20:
-                    report.rejections.append(f"t = {t:.9g} s: {r}")
-        if t_ns >= last_ns or not outputs:
-            break
-        if until is not None:
-            if not t < until - 1e-12 * max(1.0, until):
-                break
-            runner.dt = min(dt, until - t)         # flexmb run shortens the last step the same way
-        outcome = runner.step()
-        runner.dt = dt
-        report.steps += 1
-        if not outcome.advanced:
-            report.failed_steps += 1
-            failed_in_a_row += 1
-            if failed_in_a_row >= _MAX_FAILED_STEPS:
-                report.failure = f"{failed_in_a_row} replay steps in a row failed at t = {t:.9g} s: {outcome.message}"
-                break
-            continue
-        failed_in_a_row = 0
-        compare_at(_ns(runner.t))
-    report.t_end = runner.t
+    done = run_lockstep(runner, commands, last_ns=last_ns, until=twin.until, at=at)
+    report.steps, report.failed_steps, report.failure = done.steps, done.failed_steps, done.failure
+    report.commands_applied, report.commands_rejected = done.commands_applied, done.commands_rejected
+    report.rejections = done.rejections
+    report.t_end = done.t_end
     report.wall_time_s = time.perf_counter() - wall0
     if outputs:
         report.samples_unmatched = sum(len(v) for v in outputs.values())
@@ -333,6 +302,3 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
     report.fields = sorted(cmp.stats.values(), key=lambda f: (f.topic, f.field))
     return report
 
-
-def _ns(t: float) -> int:
-    return int(round(t * 1e9))
