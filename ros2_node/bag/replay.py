@@ -59,6 +59,47 @@ class Twin:
     scene_source: str
 
 
+@dataclass(frozen=True)
+class TwinSetup:
+    """Everything a bag says about the twin that recorded it, as plain data (picklable: a
+    calibration ships it to Dask workers): the scene text and the ``flexmb`` metadata settings."""
+
+    scene_text: str
+    scene_source: str
+    solver: dict                   # the effective SolverSpec keys of the recorded run
+    runner_options: dict
+    node_name: str
+    until: float | None            # offline runs: where the last step lands
+
+
+def read_setup(reader: BagReader, scene_path: str | None = None) -> TwinSetup:
+    """The :class:`TwinSetup` of a bag (``scene_path``: a scene file instead of the attached one).
+
+    Raises
+    ------
+    ReplayError
+        When the bag has no scene (and none is given) or its settings are unreadable.
+    """
+    if scene_path is not None:
+        text, source = Path(scene_path).read_text(encoding="utf-8"), str(scene_path)
+    else:
+        text, source = reader.scene_text(), f"{reader.file}:scene.yaml"
+        if text is None:
+            raise ReplayError(f"{reader.path}: no scene.yaml attachment (not recorded by flexmb?); "
+                              "give the scene with --scene PATH")
+    try:
+        solver = reader.setting("solver", {}, as_json=True)
+        opts = reader.setting("runner_options", {}, as_json=True)
+        until = reader.setting("until")
+    except json.JSONDecodeError as exc:
+        raise ReplayError(f"{reader.path}: unreadable settings in the 'flexmb' metadata ({exc})") from None
+    if not solver:                              # older bags / other writers: the scalar keys
+        solver = {k: json.loads(reader.setting(k)) if k == "dt" else reader.setting(k)
+                  for k in ("dt", "integrator") if reader.setting(k) is not None}
+    return TwinSetup(text, source, solver, opts, reader.setting("node_name") or T.DEFAULT_NODE_NAME,
+                     float(until) if until is not None else None)
+
+
 def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[str] | None = None) -> Twin:
     """Scene, compiled model and runner options of a bag (see the module docstring).
 
@@ -69,44 +110,44 @@ def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[
     flexmb_core.errors.SceneError
         When the (modified) scene does not validate.
     """
+    return build_twin(read_setup(reader, scene_path), overrides, where=str(reader.path))
+
+
+def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: str = "") -> Twin:
+    """Compile the twin of a :class:`TwinSetup` with ``KEY=VALUE`` scene edits (``solver.X`` keys win
+    over the recorded solver settings).
+
+    Raises
+    ------
+    ReplayError
+        When the recorded runner options are unknown to this flexmb.
+    flexmb_core.errors.SceneError
+        When the (modified) scene does not validate.
+    """
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.scene.loader import parse_yaml, scene_from_dict
 
     from ..twin import RunnerOptions
     from .recorder import scene_sha256
 
-    if scene_path is not None:
-        text, source = Path(scene_path).read_text(encoding="utf-8"), str(scene_path)
-    else:
-        text, source = reader.scene_text(), f"{reader.file}:scene.yaml"
-        if text is None:
-            raise ReplayError(f"{reader.path}: no scene.yaml attachment (not recorded by flexmb?); "
-                              "give the scene with --scene PATH")
-    data = parse_yaml(text)
+    data = parse_yaml(setup.scene_text)
     if not isinstance(data, dict):
-        raise ReplayError(f"{source}: not a scene mapping")
-    user_solver = apply_overrides(data, overrides)
-    try:
-        solver = reader.setting("solver", {}, as_json=True)
-        opts = reader.setting("runner_options", {}, as_json=True)
-        until = reader.setting("until")
-    except json.JSONDecodeError as exc:
-        raise ReplayError(f"{reader.path}: unreadable settings in the 'flexmb' metadata ({exc})") from None
-    if not solver:                              # older bags / other writers: the scalar keys
-        solver = {k: json.loads(reader.setting(k)) if k == "dt" else reader.setting(k)
-                  for k in ("dt", "integrator") if reader.setting(k) is not None}
-    solver.update(user_solver)
-    scene = scene_from_dict(data, source=source, overrides=solver)
+        raise ReplayError(f"{setup.scene_source}: not a scene mapping")
+    solver = dict(setup.solver)
+    solver.update(apply_overrides(data, overrides))
+    scene = scene_from_dict(data, source=setup.scene_source, overrides=solver)
+    opts = dict(setup.runner_options)
     fields = {f.name: f for f in dataclasses.fields(RunnerOptions)}
     unknown = sorted(set(opts) - set(fields))
     if unknown:
-        raise ReplayError(f"{reader.path}: runner_options {unknown} unknown to this flexmb (has {sorted(fields)})")
+        raise ReplayError(f"{where or setup.scene_source}: runner_options {unknown} unknown to this flexmb "
+                          f"(has {sorted(fields)})")
     # bags from before command holds existed applied every command as a step from its step on
     opts.setdefault("command_hold", "step")
     options = RunnerOptions(**{k: (float(v) if isinstance(fields[k].default, float) and isinstance(v, int)
                                    and not isinstance(v, bool) else v) for k, v in opts.items()})
-    return Twin(scene, compile_scene(scene), options, reader.setting("node_name") or T.DEFAULT_NODE_NAME,
-                float(until) if until is not None else None, scene_sha256(text), source)
+    return Twin(scene, compile_scene(scene), options, setup.node_name, setup.until,
+                scene_sha256(setup.scene_text), setup.scene_source)
 
 
 @dataclass
