@@ -12,6 +12,7 @@ from pathlib import Path
 
 from flexmb_core.cli import add_run_hook
 
+from .calibrate_cli import register as register_calibrate
 from .defaults import DEFAULT_RECORD_RATE, MAX_SHAPE_RATE
 from .tolerances import DEFAULT_TOLERANCES, UNITS
 
@@ -125,6 +126,7 @@ def register(verbs, run_parser: argparse.ArgumentParser) -> None:
                             help=f"outputs recorded per simulated second (default {DEFAULT_RECORD_RATE:g}; shape at "
                                  f"most {MAX_SHAPE_RATE:g} Hz; commands every step; always the last state)")
     add_run_hook(run_parser, _make_hook)
+    register_calibrate(verbs)
 
 
 def main(argv=None) -> int:          # pragma: no cover - convenience

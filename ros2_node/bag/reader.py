@@ -17,7 +17,7 @@ import json
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from . import rosbag2
 from .recorder import METADATA_NAME, SCENE_ATTACHMENT
@@ -262,10 +262,14 @@ class BagReader:
         return min(times), max(times)
 
 
-def recover(src, out_dir, *, chunk_seconds: float = 0.25) -> BagReader:
+def recover(src, out_dir, *, chunk_seconds: float = 0.25,
+            edit: Callable[[str, str, bytes], bytes] | None = None) -> BagReader:
     """Write a complete bag at ``out_dir`` from everything readable in ``src`` (a bag or ``.mcap``,
     possibly cut short): attachments, metadata records, schemas, channels and messages, with
     their original log times and bytes. Returns the reader of ``src``.
+
+    ``edit(topic, type_name, cdr)`` may return other CDR bytes for a message (e.g. measurement
+    noise added to the outputs of a synthetic recording); None copies every message as it is.
 
     Raises
     ------
@@ -288,7 +292,8 @@ def recover(src, out_dir, *, chunk_seconds: float = 0.25) -> BagReader:
         for m in r.messages_raw:
             ch = chans.get(m.channel_id)
             if ch is not None:
-                out.write_cdr(ch, bytes(m.data), m.log_time)
+                data = bytes(m.data)
+                out.write_cdr(ch, data if edit is None else edit(ch.info.name, ch.info.type, data), m.log_time)
     finally:
         out.close()
     return r

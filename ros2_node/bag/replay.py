@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from flexmb_core.errors import FlexmbError
-from flexmb_core.scene.overrides import apply_overrides
+from flexmb_core.scene.overrides import apply_overrides, set_path, split_key
 
 from .. import topics as T
 from .compare import Comparison, FieldStat
@@ -113,9 +113,11 @@ def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[
     return build_twin(read_setup(reader, scene_path), overrides, where=str(reader.path))
 
 
-def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: str = "") -> Twin:
+def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: str = "",
+               values: dict[str, Any] | None = None) -> Twin:
     """Compile the twin of a :class:`TwinSetup` with ``KEY=VALUE`` scene edits (``solver.X`` keys win
-    over the recorded solver settings).
+    over the recorded solver settings), then ``values`` (dotted key → number, as parsed values: a
+    calibration's trial point).
 
     Raises
     ------
@@ -135,6 +137,8 @@ def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: s
         raise ReplayError(f"{setup.scene_source}: not a scene mapping")
     solver = dict(setup.solver)
     solver.update(apply_overrides(data, overrides))
+    for key, value in (values or {}).items():
+        set_path(data, split_key(key), value, item=f"{key}={value!r}", flag="--fit")
     scene = scene_from_dict(data, source=setup.scene_source, overrides=solver)
     opts = dict(setup.runner_options)
     fields = {f.name: f for f in dataclasses.fields(RunnerOptions)}
