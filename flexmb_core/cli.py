@@ -11,9 +11,10 @@ Verbs:
   flexmb commands stewart --out CSV       the Stewart appendix leg-length commands (Eqs. 52–60)
   flexmb bench [--case b1|spin_up|stewart|all] [--quick] [--out DIR]
                                           work-precision reports (source checkout, extra [bench])
-  flexmb tune SCENE --tol TOL [--until T] [--out DIR]
+  flexmb tune SCENE --tol TOL [--until T] [--out DIR] [--scheduler ADDRESS] [--workers N]
                                           cheapest fidelity whose outputs stay within TOL of a
-                                          converged reference; writes the tuned scene and its table
+                                          converged reference; writes the tuned scene and its table;
+                                          each round's candidates run on Dask
 
 Exit codes: 0 success, 1 bad input (scene, flags), 2 a step did not converge.
 """
@@ -261,7 +262,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     import yaml
 
     from .scene.loader import parse_yaml, read_scene_text
-    from .tune import report_markdown, tune
+    from .tune import held_outputs, report_markdown, tune
 
     path = Path(args.scene)
     _load(args.scene)                                   # validate first: errors name file:key
@@ -269,16 +270,22 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if not args.tol > 0:
         print(f"flexmb tune: --tol must be a positive number, got {args.tol}", file=sys.stderr)
         return 1
+    if args.workers is not None and args.workers < 1:
+        print(f"flexmb tune: --workers must be a positive integer, got {args.workers}", file=sys.stderr)
+        return 1
     until = args.until if args.until is not None else float(data.get("solver", {}).get("until", 1.0))
+    held = tuple(x for x in (args.outputs or "").split(",") if x) or None
+    held_outputs(data, str(path), held)                 # bad --outputs before any cluster starts
 
     def progress(trial):
         if not args.quiet:
             state = "ok " if trial.ok else ("ERR" if trial.message else "   ")
-            print(f"  [{state}] {trial.label}: {trial.steps_per_s:8.0f} steps/s, max error {trial.max_error:.2e}",
-                  flush=True)
+            how = {"parallel": " (parallel screen)", "re-timed": " (re-timed alone)"}.get(trial.timing, "")
+            print(f"  [{state}] {trial.label}: {trial.steps_per_s:8.0f} steps/s{how}, max error "
+                  f"{trial.max_error:.2e}", flush=True)
 
-    held = tuple(x for x in (args.outputs or "").split(",") if x) or None
-    result = tune(data, args.tol, until, source=str(path), progress=progress, outputs=held)
+    result = _tune_where(args, lambda ev: tune(data, args.tol, until, source=str(path), progress=progress,
+                                                outputs=held, evaluator=ev))
     out = Path(args.out or "build/tune")
     out.mkdir(parents=True, exist_ok=True)
     stem = path.stem
@@ -292,14 +299,35 @@ def cmd_tune(args: argparse.Namespace) -> int:
     (out / f"{stem}_tune.json").write_text(json.dumps({
         "scene": str(path), "tolerance": args.tol, "until": result.until, "tuned_scene": str(tuned),
         "reference_wall_per_sim_s": result.reference_wall_per_sim_s,
-        "chosen": best.label, "within_tolerance": best.ok,
+        "chosen": best.label, "within_tolerance": best.ok, "workers": result.workers, "scheduler": result.scheduler,
         "trials": [{"label": t.label, "ok": t.ok, "steps_per_s": t.steps_per_s, "wall_per_sim_s": t.wall_per_sim_s,
-                    "errors": t.errors, "message": t.message} for t in result.trials]}, indent=1))
+                    "errors": t.errors, "message": t.message, "timing": t.timing,
+                    "screen_wall_per_sim_s": t.screen_wall_per_sim_s, "screen_cpu_per_sim_s": t.screen_cpu_per_sim_s}
+                   for t in result.trials]}, indent=1))
     if not args.quiet:
         print(f"chosen: {best.label} ({best.steps_per_s:.0f} steps/s, "
               f"{result.baseline.wall_per_sim_s / best.wall_per_sim_s:.2f}× the scene as declared, "
               f"largest error {best.max_error:.2e}); wrote {tuned} and {stem}_tune.md")
     return 0 if best.ok else 3
+
+
+def _tune_where(args: argparse.Namespace, search):
+    """``search(evaluator)`` on Dask (``--scheduler``, or a local cluster of ``--workers`` processes,
+    default one per core) or, with ``--workers 1`` / one core / Dask not installed, in this process."""
+    import importlib.util
+
+    from .study.cluster import connect, default_workers
+    from .tune import InProcess, OnDask
+
+    if not args.scheduler and (args.workers or default_workers()) == 1:
+        return search(InProcess())
+    if not args.scheduler and importlib.util.find_spec("distributed") is None:
+        if not args.quiet:
+            print("flexmb tune: Dask is not installed (extra [cluster]): candidates run one after another "
+                  "in this process", file=sys.stderr)
+        return search(InProcess())
+    with connect(args.scheduler, args.workers, verb="flexmb tune") as client:
+        return search(OnDask(client))
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -402,6 +430,11 @@ def build_parser() -> argparse.ArgumentParser:
     tn.add_argument("--out", help="directory for SCENE_tuned.yaml, SCENE_tune.md/.json (default build/tune)")
     tn.add_argument("--outputs", metavar="A,B,..",
                     help="outputs held to --tol (default: the kinematic ones; forces and energy are reported)")
+    tn.add_argument("--scheduler", metavar="ADDRESS",
+                    help="a running Dask scheduler (tcp://host:8786); default: a local cluster")
+    tn.add_argument("--workers", type=int, metavar="N",
+                    help="worker processes of the local cluster (default: one per core; 1: no Dask, the "
+                         "candidates run one after another in this process)")
     tn.add_argument("--quiet", action="store_true")
     tn.set_defaults(func=cmd_tune)
 

@@ -16,6 +16,20 @@ reference's largest magnitude for forces and energies (so ``--tol 1e-4`` means 0
 and 0.01 %). By default the kinematic outputs (positions, poses, lengths, angles) are held to the
 tolerance and forces and energies are reported only — an undamped member's force rings differently
 at every Δt and would hold the search at the reference; name outputs to constrain them too.
+
+Where the runs happen is an *evaluator*'s business; the search is the same. :class:`InProcess`
+runs them one after another in this process (``--workers 1``). :class:`OnDask` (issue 17, the
+default of ``flexmb tune`` where Dask is installed) runs the reference, the scene as declared and
+the first round's candidates as Dask tasks at once, then each round's candidates at once. Errors
+do not depend on where a run happens (the same code gives the same bits). Speeds do: runs that
+share a core, a memory bus or a hyper-threaded core with another run are slowed by it, and the
+last run of a round may have the machine to itself. So a round on Dask is only a *screen*: each
+run also measures the CPU time of its stepping thread (which time-slicing with other processes
+does not inflate), the passing candidates within ``RETIME_BAND`` of the least CPU time are the
+finalists, and the finalists — with the current best when it was only screened — are timed again
+one at a time on one worker while nothing else of the search runs (``timing: re-timed``). The
+choice between candidates and the "pays ≥ 5 %" test use those wall times only, measured as the
+sequential search measures them (stepping only, output sampling excluded).
 """
 
 from __future__ import annotations
@@ -40,7 +54,14 @@ RELATIVE = {"actuator_force", "energy"}
 
 @dataclass
 class Trial:
-    """One candidate: what changed, how fast it ran and how far its outputs are from the reference."""
+    """One candidate: what changed, how fast it ran and how far its outputs are from the reference.
+
+    ``wall_per_sim_s`` / ``steps_per_s`` are what the search compares; ``timing`` says how they were
+    measured: ``in-process`` (the sequential search: one run at a time in this process),
+    ``parallel`` (a Dask worker, other runs of the round at the same time: a screen only) or
+    ``re-timed`` (run again alone on one worker). ``screen_*`` keep the first run's wall and
+    stepping-thread CPU time per simulated second.
+    """
 
     label: str
     scene: dict
@@ -50,6 +71,9 @@ class Trial:
     ok: bool = False
     message: str = ""
     constrained: frozenset = frozenset()
+    timing: str = "in-process"
+    screen_wall_per_sim_s: float = math.nan
+    screen_cpu_per_sim_s: float = math.nan
 
     @property
     def max_error(self) -> float:
@@ -70,22 +94,77 @@ def _flatten(kind: str, value) -> np.ndarray:
 def _run(scene_dict: dict, until: float, sample: float, source: str) -> tuple[dict, float, int]:
     """Run a scene dict to ``until``; outputs sampled every ``sample`` s (kind, (n, k) array per
     output), the wall time of the stepping (JIT warm-up excluded) and the step count."""
+    series, wall, _, steps = _run_timed(scene_dict, until, sample, source)
+    return series, wall, steps
+
+
+def _run_timed(scene_dict: dict, until: float, sample: float, source: str) -> tuple[dict, float, float, int]:
+    """:func:`_run` that also returns the CPU time (s) of this thread while stepping (the flexmb
+    step is single-threaded: BLAS at one thread, numba without ``parallel``)."""
     scene = scene_from_dict(scene_dict, source=source, overrides={"until": until})
     model = compile_scene(scene)
+    _prime(model, min(until, 2.0 * sample))
     sim = Simulator(model)
     sim.warmup()
     sim.initialize()
     kinds = {o.name: o.kind for o in scene.outputs}
     series: dict[str, list] = {k: [] for k in kinds}
-    wall = 0.0
+    wall = cpu = 0.0
     n = int(round(until / sample))
     for k in range(1, n + 1):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         sim.run(k * sample)
         wall += time.perf_counter() - t0            # stepping only, not the output sampling
+        cpu += time.thread_time() - c0
         for name, val in sim.outputs().items():
             series[name].append(_flatten(kinds[name], val))
-    return {k: (kinds[k], np.asarray(v)) for k, v in series.items()}, wall, sim.stats.steps
+    return {k: (kinds[k], np.asarray(v)) for k, v in series.items()}, wall, cpu, sim.stats.steps
+
+
+def _prime(model, until: float) -> None:
+    """An untimed short run on a throwaway simulator: loads every kernel a step can reach (warmup()
+    covers the assembly only), so a process's first run of a kind is not timed with its compilation
+    or cache loading — on a Dask worker any candidate may be that first run."""
+    sim = Simulator(model)
+    sim.warmup()
+    try:
+        sim.initialize()
+        sim.run(until)
+    except ConvergenceError:
+        pass                                        # the timed run reports it
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run of the search: a scene dict over ``until`` s, sampled every ``sample`` s (picklable:
+    what a Dask task receives)."""
+
+    scene: dict
+    until: float
+    sample: float
+    source: str
+
+
+@dataclass
+class Measured:
+    """What a run returns: sampled outputs (as :func:`_run`), stepping wall and CPU time (s), steps;
+    ``message`` when the scene or a step failed (then ``series`` is None)."""
+
+    series: dict | None
+    wall: float
+    cpu: float
+    steps: int
+    message: str = ""
+
+
+def measure(job: Job) -> Measured:
+    """Run one candidate (the task of the search). A scene that does not compile or a step that
+    does not converge is a :class:`Measured` with its message; anything else raises."""
+    try:
+        series, wall, cpu, steps = _run_timed(job.scene, job.until, job.sample, job.source)
+    except (ConvergenceError, FlexmbError) as exc:
+        return Measured(None, math.nan, math.nan, 0, str(exc))
+    return Measured(series, wall, cpu, steps)
 
 
 def _rotation_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
@@ -207,14 +286,76 @@ class TuneResult:
     baseline: Trial
     trials: list[Trial]
     best: Trial
+    workers: int = 1                   # Dask worker threads (1: in this process)
+    scheduler: str = ""                # the Dask scheduler's address ("" in this process)
 
 
-def tune(scene: dict, tol: float, until: float, source: str = "<scene>",
-         progress: Callable[[Trial], None] | None = None, max_rounds: int = 8,
-         outputs: tuple[str, ...] | None = None) -> TuneResult:
-    """Greedy search for the cheapest fidelity within ``tol`` (see the module docstring).
+# -- where the runs happen ----------------------------------------------------------------------------
+RETIME_BAND = 1.25      # finalists: passing candidates within 25 % of the least screened CPU time
 
-    ``outputs``: names of the outputs held to ``tol`` (default: every kinematic output)."""
+
+class InProcess:
+    """Every run in this process, one after another (the sequential search): each wall time is taken
+    with nothing else of the search running, so no run is timed twice."""
+
+    workers, scheduler, timing = 1, "", "in-process"
+
+    def runs(self, jobs: list[Job], on_result: Callable[[int, Measured], None]) -> list[Measured]:
+        out = []
+        for i, job in enumerate(jobs):
+            out.append(measure(job))
+            on_result(i, out[-1])
+        return out
+
+    def finalists(self, passing: list[Trial]) -> list[Trial]:
+        return passing
+
+    def retime(self, trials: list[Trial], job: Callable[[Trial], Job]) -> None:
+        return None
+
+
+class OnDask:
+    """Runs as tasks of a Dask client (see the module docstring): a batch at once, finalists re-timed
+    one at a time on one worker."""
+
+    timing = "parallel"
+
+    def __init__(self, client):
+        from .study.tasks import cluster_facts
+
+        self.client = client
+        self.scheduler, self.workers = cluster_facts(client)
+        self._worker: str | None = None
+
+    def runs(self, jobs: list[Job], on_result: Callable[[int, Measured], None]) -> list[Measured]:
+        from .study.tasks import run_all
+
+        return run_all(self.client, measure, jobs, name="flexmb-tune", on_result=on_result)
+
+    def finalists(self, passing: list[Trial]) -> list[Trial]:
+        least = min(t.screen_cpu_per_sim_s for t in passing)
+        return [t for t in passing if t.screen_cpu_per_sim_s <= RETIME_BAND * least]
+
+    def retime(self, trials: list[Trial], job: Callable[[Trial], Job]) -> None:
+        from .study.tasks import run_alone, timing_worker
+
+        self._worker = self._worker or timing_worker(self.client)
+        for t in trials:
+            j = job(t)
+            m = run_alone(self.client, measure, j, self._worker, name="flexmb-tune-retime")
+            if not m.message:                   # the same run succeeded once; kept as screened otherwise
+                _set_speed(t, m, j.until)
+                t.timing = "re-timed"
+
+
+def _set_speed(t: Trial, m: Measured, until: float) -> None:
+    t.steps_per_s = m.steps / max(m.wall, 1e-12)
+    t.wall_per_sim_s = m.wall / until
+
+
+def held_outputs(scene: dict, source: str, outputs: tuple[str, ...] | None) -> frozenset:
+    """The outputs held to the tolerance (``outputs``, or every kinematic one); checks the scene can
+    be tuned. Raises :class:`FlexmbError` naming the problem."""
     if scene.get("solver", {}).get("analysis", "dynamic") != "dynamic":
         raise FlexmbError(f"{source}: tune needs a dynamic scene (solver.analysis: dynamic)")
     declared = scene.get("outputs") or {}
@@ -225,53 +366,102 @@ def tune(scene: dict, tol: float, until: float, source: str = "<scene>",
         if unknown:
             raise FlexmbError(f"{source}: --outputs names {unknown}, which the scene does not declare; "
                               f"declared: {sorted(declared)}")
-        constrained = frozenset(outputs)
-    else:
-        constrained = frozenset(k for k, o in declared.items() if o.get("kind") not in RELATIVE)
+        return frozenset(outputs)
+    constrained = frozenset(k for k, o in declared.items() if o.get("kind") not in RELATIVE)
     if not constrained:
         raise FlexmbError(f"{source}: the scene declares no kinematic output; name the outputs to hold "
                           f"with --outputs (declared: {sorted(declared)})")
+    return constrained
+
+
+def _candidates(best: Trial, baseline: Trial) -> list[tuple[str, dict]]:
+    """Every single-knob coarsening of ``best`` (labels carry the path from the scene as declared)."""
+    out = []
+    for label, move in moves(best.scene):
+        cand = move(copy.deepcopy(best.scene))
+        if cand is not None:
+            out.append((f"{best.label} + {label}" if best is not baseline else label, cand))
+    return out
+
+
+def tune(scene: dict, tol: float, until: float, source: str = "<scene>",
+         progress: Callable[[Trial], None] | None = None, max_rounds: int = 8,
+         outputs: tuple[str, ...] | None = None, evaluator: InProcess | OnDask | None = None) -> TuneResult:
+    """Greedy search for the cheapest fidelity within ``tol`` (see the module docstring).
+
+    ``outputs``: names of the outputs held to ``tol`` (default: every kinematic output).
+    ``evaluator``: where the runs happen (default :class:`InProcess`); ``progress(trial)`` is called
+    when a trial's run arrives and again when it has been re-timed."""
+    constrained = held_outputs(scene, source, outputs)
+    ev = evaluator or InProcess()
     sample = 4.0 * scene.get("solver", {}).get("dt", 1e-3)
     until = max(sample, round(until / sample) * sample)
-    ref, ref_wall, _ = _run(reference_scene(scene), until, sample, source)
+    ref: list[Measured] = []
 
-    def evaluate(label: str, s: dict) -> Trial:
-        trial = Trial(label, s, constrained=constrained)
-        try:
-            run, wall, steps = _run(s, until, sample, source)
-        except (ConvergenceError, FlexmbError) as exc:
-            trial.message = str(exc)
-            return trial
-        trial.steps_per_s = steps / max(wall, 1e-12)
-        trial.wall_per_sim_s = wall / until
-        trial.errors = output_errors(run, ref)
-        trial.ok = trial.max_error <= tol
-        if progress is not None:
-            progress(trial)
-        return trial
+    def job(s: dict | Trial) -> Job:
+        return Job(s.scene if isinstance(s, Trial) else s, until, sample, source)
 
-    baseline = evaluate("as declared", copy.deepcopy(scene))
+    def to_trial(label: str, s: dict, m: Measured) -> Trial:
+        t = Trial(label, s, constrained=constrained, timing=ev.timing)
+        if m.message:
+            t.message = m.message
+            return t
+        _set_speed(t, m, until)
+        t.screen_wall_per_sim_s, t.screen_cpu_per_sim_s = m.wall / until, m.cpu / until
+        t.errors = output_errors(m.series, ref[0].series)
+        t.ok = t.max_error <= tol
+        return t
+
+    def evaluate(cands: list[tuple[str, dict]], with_reference: bool = False) -> list[Trial]:
+        k0 = int(with_reference)
+        jobs = ([job(reference_scene(scene))] if with_reference else []) + [job(s) for _, s in cands]
+        trials: list[Trial | None] = [None] * len(cands)
+        arrived: dict[int, Measured] = {}
+
+        def on_result(i: int, m: Measured) -> None:      # trials need the reference: held until it is in
+            arrived[i] = m
+            if with_reference and not ref and 0 in arrived:
+                if arrived[0].message:
+                    raise FlexmbError(f"{source}: the refined reference (tune's yardstick) did not run: "
+                                      f"{arrived[0].message}")
+                ref.append(arrived[0])
+            if not ref:
+                return
+            for j in sorted(k for k in arrived if k >= k0 and trials[k - k0] is None):
+                label, s = cands[j - k0]
+                trials[j - k0] = to_trial(label, s, arrived[j])
+                if progress is not None:
+                    progress(trials[j - k0])
+
+        ev.runs(jobs, on_result)
+        return trials
+
+    baseline = Trial("as declared", copy.deepcopy(scene))
+    first = evaluate([("as declared", baseline.scene)] + _candidates(baseline, baseline), with_reference=True)
+    baseline, round_trials = first[0], first[1:]
     trials = [baseline]
     best = baseline
-    for _ in range(max_rounds):
-        round_trials = []
-        for label, move in moves(best.scene):
-            cand = move(copy.deepcopy(best.scene))
-            if cand is None:
-                continue
-            t = evaluate(f"{best.label} + {label}" if best is not baseline else label, cand)
-            trials.append(t)
-            round_trials.append(t)
+    for r in range(max_rounds):
+        if r:
+            round_trials = evaluate(_candidates(best, baseline))
+        trials += round_trials
         passing = [t for t in round_trials if t.ok]
         if not passing:
             break
-        fastest = min(passing, key=lambda t: t.wall_per_sim_s)
+        finalists = ev.finalists(passing)
+        again = ([best] if best.ok and best.timing == "parallel" else []) + finalists
+        ev.retime(again, job)
+        if progress is not None:
+            for t in again:
+                if t.timing == "re-timed":
+                    progress(t)
+        fastest = min(finalists, key=lambda t: t.wall_per_sim_s)
         if not (fastest.wall_per_sim_s < 0.95 * best.wall_per_sim_s) and best.ok:
             break
         best = fastest
     if not best.ok:
         best = min((t for t in trials if t.ok), key=lambda t: t.wall_per_sim_s, default=best)
-    return TuneResult(tol, until, ref_wall / until, baseline, trials, best)
+    return TuneResult(tol, until, ref[0].wall / until, baseline, trials, best, ev.workers, ev.scheduler)
 
 
 def report_markdown(result: TuneResult, scene_name: str) -> str:
@@ -280,14 +470,14 @@ def report_markdown(result: TuneResult, scene_name: str) -> str:
     lines = [f"# flexmb tune: {scene_name}, tolerance {result.tolerance:g}, horizon {result.until:g} s", "",
              f"Reference (refined scene, Δt / 4): {result.reference_wall_per_sim_s:.3g} s of wall time per "
              "simulated second. Errors: m for positions, rad for orientations and angles, relative for forces "
-             "and energy.", "",
-             "| candidate | within tol | steps/s | wall s per sim s | "
+             "and energy.", "", _timing_note(result), "",
+             "| candidate | within tol | steps/s | wall s per sim s | timed | "
              + " | ".join(n if n.split(".")[0] in held else f"{n} (reported)" for n in names) + " |",
-             "|---|---|---|---|" + "---|" * len(names)]
+             "|---|---|---|---|---|" + "---|" * len(names)]
     for t in result.trials:
         errs = " | ".join(f"{t.errors[n]:.2e}" if n in t.errors else "–" for n in names)
         mark = "**chosen**" if t is result.best else ("yes" if t.ok else ("failed" if t.message else "no"))
-        lines.append(f"| {t.label} | {mark} | {t.steps_per_s:.0f} | {t.wall_per_sim_s:.3g} | {errs} |")
+        lines.append(f"| {t.label} | {mark} | {t.steps_per_s:.0f} | {t.wall_per_sim_s:.3g} | {t.timing} | {errs} |")
     b = result.best
     lines += ["", f"Chosen: **{b.label}**, {b.steps_per_s:.0f} steps/s "
               f"({result.baseline.wall_per_sim_s / b.wall_per_sim_s:.2f}× the scene as declared), "
@@ -296,3 +486,13 @@ def report_markdown(result: TuneResult, scene_name: str) -> str:
     if fails:
         lines += ["", "Candidates that failed to run:"] + [f"- {t.label}: {t.message}" for t in fails]
     return "\n".join(lines) + "\n"
+
+
+def _timing_note(result: TuneResult) -> str:
+    if not result.scheduler:
+        return "Timed in this process, one run after another (`timed: in-process`)."
+    return (f"Runs on Dask ({result.workers} workers, scheduler {result.scheduler}): errors and a first timing "
+            "of each round's candidates in parallel (`timed: parallel`, a screen only: runs at the same time "
+            f"slow each other down); the passing candidates within {RETIME_BAND:g}× the least stepping CPU time, "
+            "and the scene they are compared with, timed again one at a time on one worker (`timed: re-timed`). "
+            "Only re-timed wall times decide.")
