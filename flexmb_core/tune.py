@@ -300,10 +300,13 @@ class InProcess:
 
     workers, scheduler, timing = 1, "", "in-process"
 
+    def __init__(self, task: Callable[[Job], Measured] = measure):
+        self.task = task                    # what runs a Job (default measure)
+
     def runs(self, jobs: list[Job], on_result: Callable[[int, Measured], None]) -> list[Measured]:
         out = []
         for i, job in enumerate(jobs):
-            out.append(measure(job))
+            out.append(self.task(job))
             on_result(i, out[-1])
         return out
 
@@ -320,17 +323,18 @@ class OnDask:
 
     timing = "parallel"
 
-    def __init__(self, client):
+    def __init__(self, client, task: Callable[[Job], Measured] = measure):
         from .study.tasks import cluster_facts
 
         self.client = client
+        self.task = task                    # what runs a Job: a module-level function the workers import
         self.scheduler, self.workers = cluster_facts(client)
         self._worker: str | None = None
 
     def runs(self, jobs: list[Job], on_result: Callable[[int, Measured], None]) -> list[Measured]:
         from .study.tasks import run_all
 
-        return run_all(self.client, measure, jobs, name="flexmb-tune", on_result=on_result)
+        return run_all(self.client, self.task, jobs, name="flexmb-tune", on_result=on_result)
 
     def finalists(self, passing: list[Trial]) -> list[Trial]:
         least = min(t.screen_cpu_per_sim_s for t in passing)
@@ -342,7 +346,7 @@ class OnDask:
         self._worker = self._worker or timing_worker(self.client)
         for t in trials:
             j = job(t)
-            m = run_alone(self.client, measure, j, self._worker, name="flexmb-tune-retime")
+            m = run_alone(self.client, self.task, j, self._worker, name="flexmb-tune-retime")
             if not m.message:                   # the same run succeeded once; kept as screened otherwise
                 _set_speed(t, m, j.until)
                 t.timing = "re-timed"
