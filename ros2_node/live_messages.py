@@ -13,7 +13,6 @@ from flexmb_core.report import TwinSample
 from . import messages as M
 from .convert import message_class
 from .shells import ShellShapes
-from .topics import WORLD_FRAME
 
 
 def _set_stamp(stamp, t: float) -> None:
@@ -31,24 +30,26 @@ def _set_pose(pose, position, wxyz) -> None:
 class LiveMessages:
     """Reusable messages for one twin (publishing serializes at once, so reuse is safe)."""
 
-    def __init__(self, sample: TwinSample):
+    def __init__(self, sample: TwinSample, frames: M.Frames = M.DEFAULT_FRAMES):
+        self.frames = frames
+        world = frames.world
         JointState = message_class("sensor_msgs/msg/JointState")
         ActuatorState = message_class("flexmb_msgs/msg/ActuatorState")
         PoseStamped = message_class("geometry_msgs/msg/PoseStamped")
         TwinStatus = message_class("flexmb_msgs/msg/TwinStatus")
         Clock = message_class("rosgraph_msgs/msg/Clock")
         self.joint_state = JointState()
-        self.joint_state.header.frame_id = WORLD_FRAME
+        self.joint_state.header.frame_id = world
         self.joint_state.name = list(sample.actuator_names) + list(sample.joint_names)
         self._zero_efforts = [0.0] * len(sample.joint_names)
         self.actuator_state = ActuatorState()
-        self.actuator_state.header.frame_id = WORLD_FRAME
+        self.actuator_state.header.frame_id = world
         self.actuator_state.names = list(sample.actuator_names)
         self.poses = [PoseStamped() for _ in sample.poses]
         for p in self.poses:
-            p.header.frame_id = WORLD_FRAME
+            p.header.frame_id = world
         self.status_msg = TwinStatus()
-        self.status_msg.header.frame_id = WORLD_FRAME
+        self.status_msg.header.frame_id = world
         self.clock_msg = Clock()
         self.tf_msg = None
         try:
@@ -57,8 +58,8 @@ class LiveMessages:
             self.tf_msg = TFMessage()
             self.tf_msg.transforms = [TransformStamped() for _ in sample.poses]
             for tr, p in zip(self.tf_msg.transforms, sample.poses):
-                tr.header.frame_id = WORLD_FRAME
-                tr.child_frame_id = p.name
+                tr.header.frame_id = world
+                tr.child_frame_id = frames.child(p.name)
         except ModuleNotFoundError:
             pass
 
@@ -128,7 +129,7 @@ class LiveMessages:
         markers = []
         for d in template:
             mk = Marker()
-            mk.header.frame_id = WORLD_FRAME
+            mk.header.frame_id = self.frames.world
             mk.ns, mk.id, mk.type, mk.action = d["ns"], d["id"], d["type"], d["action"]
             mk.pose.orientation.w = 1.0
             mk.scale.x, mk.scale.y, mk.scale.z = d["scale"]["x"], d["scale"]["y"], d["scale"]["z"]

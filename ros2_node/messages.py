@@ -3,7 +3,8 @@
 One dict per message, with the ROS field names: ``mcap_ros2`` encodes them straight into a
 recording, and :func:`ros2_node.convert.to_ros` fills the rclpy message the live node publishes,
 so live topics and recordings cannot disagree. Time stamps are the simulated time (the node owns
-the clock and publishes it on ``/clock``).
+the clock and publishes it on ``/clock``). Frame ids come from a :class:`Frames` (the node's
+``world_frame`` and ``frame_prefix`` parameters; ``world`` and no prefix by default).
 """
 
 from __future__ import annotations
@@ -26,6 +27,20 @@ MEMBER_RGBA = {"actuator": (0.95, 0.55, 0.10, 1.0), "frame": (0.35, 0.55, 0.85, 
 SHELL_RGBA = MEMBER_RGBA["shell"]
 
 
+@dataclass(frozen=True)
+class Frames:
+    """The frame ids of a twin's messages."""
+
+    world: str = WORLD_FRAME     # frame_id of every header, parent of every transform
+    prefix: str = ""             # prepended to each platform's frame (the tf child frames)
+
+    def child(self, name: str) -> str:
+        return self.prefix + name
+
+
+DEFAULT_FRAMES = Frames()
+
+
 def stamp(t: float) -> dict:
     """``builtin_interfaces/Time`` of a time in seconds (t ≥ 0), rounded to the nanosecond."""
     ns = int(round(t * 1e9))
@@ -43,20 +58,20 @@ def header(t: float, frame_id: str = WORLD_FRAME) -> dict:
     return {"stamp": stamp(t), "frame_id": frame_id}
 
 
-def joint_state(s: TwinSample) -> dict:
+def joint_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
     """``sensor_msgs/JointState``: actuators (length, rate, axial force as effort), then the passive
     joints (angle, rate, zero effort: the joints are frictionless)."""
     nj = len(s.joint_names)
-    return {"header": header(s.t),
+    return {"header": header(s.t, frames.world),
             "name": list(s.actuator_names) + list(s.joint_names),
             "position": s.actuator_lengths.tolist() + s.joint_positions.tolist(),
             "velocity": s.actuator_velocities.tolist() + s.joint_velocities.tolist(),
             "effort": s.actuator_forces.tolist() + [0.0] * nj}
 
 
-def actuator_state(s: TwinSample) -> dict:
+def actuator_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
     """``flexmb_msgs/ActuatorState``."""
-    return {"header": header(s.t), "names": list(s.actuator_names),
+    return {"header": header(s.t, frames.world), "names": list(s.actuator_names),
             "lengths": s.actuator_lengths.tolist(), "velocities": s.actuator_velocities.tolist(),
             "commanded_lengths": s.actuator_commands.tolist(), "axial_forces": s.actuator_forces.tolist()}
 
@@ -66,23 +81,25 @@ def _pose(position: np.ndarray, wxyz: np.ndarray) -> dict:
             "orientation": {"x": float(wxyz[1]), "y": float(wxyz[2]), "z": float(wxyz[3]), "w": float(wxyz[0])}}
 
 
-def platform_pose(s: TwinSample, index: int = 0) -> dict:
+def platform_pose(s: TwinSample, index: int = 0, frames: Frames = DEFAULT_FRAMES) -> dict:
     """``geometry_msgs/PoseStamped`` of the ``index``-th platform."""
     p = s.poses[index]
-    return {"header": header(s.t), "pose": _pose(p.position, p.orientation_wxyz)}
+    return {"header": header(s.t, frames.world), "pose": _pose(p.position, p.orientation_wxyz)}
 
 
-def tf(s: TwinSample) -> dict:
-    """``tf2_msgs/TFMessage``: world → one frame per platform, named after its output."""
+def tf(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
+    """``tf2_msgs/TFMessage``: world → one frame per platform, named after its output (with the
+    frame prefix)."""
     out = []
     for p in s.poses:
         pose = _pose(p.position, p.orientation_wxyz)
-        out.append({"header": header(s.t), "child_frame_id": p.name,
+        out.append({"header": header(s.t, frames.world), "child_frame_id": frames.child(p.name),
                     "transform": {"translation": pose["position"], "rotation": pose["orientation"]}})
     return {"transforms": out}
 
 
-def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: ShellShapes | None = None) -> dict:
+def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: ShellShapes | None = None,
+          frames: Frames = DEFAULT_FRAMES) -> dict:
     """``visualization_msgs/MarkerArray``: one LINE_STRIP per member through its nodes, then one
     TRIANGLE_LIST per shell (ns = name, id = position in the array).
 
@@ -95,7 +112,7 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: Sh
     for k, (name, pts) in enumerate(zip(s.member_names, s.member_points)):
         r, g, b, a = MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", MEMBER_RGBA["frame"])
         markers.append({
-            "header": header(s.t), "ns": name, "id": k, "type": MARKER_LINE_STRIP, "action": MARKER_ADD,
+            "header": header(s.t, frames.world), "ns": name, "id": k, "type": MARKER_LINE_STRIP, "action": MARKER_ADD,
             "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),
             "scale": {"x": float(s.member_widths[k]), "y": 0.0, "z": 0.0},
             "color": {"r": r, "g": g, "b": b, "a": a},
@@ -105,7 +122,7 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: Sh
         r, g, b, a = SHELL_RGBA
         for i, name in enumerate(shells.names):
             markers.append({
-                "header": header(s.t), "ns": name, "id": len(markers), "type": MARKER_TRIANGLE_LIST,
+                "header": header(s.t, frames.world), "ns": name, "id": len(markers), "type": MARKER_TRIANGLE_LIST,
                 "action": MARKER_ADD, "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),
                 "scale": {"x": 1.0, "y": 1.0, "z": 1.0},
                 "color": {"r": r, "g": g, "b": b, "a": a},
@@ -130,9 +147,9 @@ class StatusTiming:
     message: str = ""                 # overrides the solver's message when set
 
 
-def status(s: TwinSample, timing: StatusTiming) -> dict:
+def status(s: TwinSample, timing: StatusTiming, frames: Frames = DEFAULT_FRAMES) -> dict:
     """``flexmb_msgs/TwinStatus``."""
-    return {"header": header(s.t), "converged": bool(s.converged),
+    return {"header": header(s.t, frames.world), "converged": bool(s.converged),
             "newton_iterations": int(s.newton_iterations), "residual": float(s.residual),
             "kinetic_energy": float(s.kinetic_energy), "strain_energy": float(s.strain_energy),
             "total_energy": float(s.total_energy), "step_wall_time": float(timing.step_wall_time),

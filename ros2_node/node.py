@@ -58,12 +58,25 @@ _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
 _LISTENER_PERIOD = 0.5
 
-# topic kind → (topic, what apply_message calls it)
-_INPUTS = ((T.COMMANDS, "commands"), (T.ACTUATOR_COMMANDS, "actuator_commands"), (T.TRAJECTORY, "joint_trajectory"))
+# topic → what apply_message calls it
+_INPUTS = tuple((t, T.KINDS[t.name]) for t in T.INPUTS)
+# QoS policies a qos_overrides.<topic>.publisher|subscription.<policy> parameter may set
+_OVERRIDABLE = ("HISTORY", "DEPTH", "RELIABILITY", "DURABILITY")
+# most steps one ~/step call takes (a call holds the twin: bounded, so the node stays responsive)
+MAX_STEP_SERVICE = 10_000_000
 
 
 class TwinNode:
-    """The twin node. Build it, then :meth:`spin` until the duration ends or ROS shuts down.
+    """The twin node, a managed (lifecycle) node. Build it, then :meth:`spin` until the duration
+    ends or ROS shuts down.
+
+    Lifecycle: *configure* loads and compiles the scene, warms the kernels up, sets the initial
+    state and creates the topics; *activate* starts (or resumes) stepping; *deactivate* holds the
+    twin (no steps, the state kept, commands ignored); *cleanup* drops the twin and its topics;
+    *shutdown* ends the node. With ``autostart`` (the default) the node configures and activates
+    itself. Services (std_srvs/Trigger unless said): ``~/reset`` (back to the initial state),
+    ``~/pause`` and ``~/resume`` (hold the steps, commands still applied), ``~/step``
+    (``flexmb_msgs/srv/Step``: N steps at once, while paused or in lockstep).
 
     Parameters
     ----------
@@ -75,13 +88,14 @@ class TwinNode:
     def __init__(self, values: dict, *, context, node_name: str = T.DEFAULT_NODE_NAME):
         import rclpy
         from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         self._rclpy = rclpy
         self.context = context
-        self.node = rclpy.create_node(node_name, context=context)
+        self.node = _managed_node(self, node_name, context)
         self.log = self.node.get_logger()
         self.node_name = self.node.get_name()
+        self.namespace = self.node.get_namespace()
+        self.fq_name = self.node.get_fully_qualified_name()
 
         # -- parameters: declared with descriptors; --ros-args -p overrides win over flags ----------
         effective = {}
@@ -102,46 +116,25 @@ class TwinNode:
             raise FlexmbError("parameter 'mode': lockstep steps once per received command, so it needs "
                               "command_source 'external', got 'scene'")
         self.node.add_on_set_parameters_callback(self._on_set_parameters)
+        self.frames = M.Frames(world=self.p.world_frame, prefix=frame_prefix(self.p.frame_prefix, self.namespace))
 
-        # -- the twin: compile, warm up, initial state (outside any timed loop) ---------------------
-        overrides = {"dt": self.p.dt or None, "integrator": self.p.integrator or None}
-        self.scene_path = self.p.scene
-        scene = load_scene(self.p.scene, overrides)
-        self.model = compile_scene(scene)
-        options = RunnerOptions.from_params(self.p)
-        self.runner = TwinRunner(self.model, options=options)
-        t0 = time.perf_counter()
-        self.runner.start()
-        self.warmup_s = time.perf_counter() - t0
-        self.dt = self.runner.dt
-
-        # -- publishers / subscriptions ------------------------------------------------------------
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.p.qos_depth,
-                         reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-        n = self.node_name
-        self._pub = {}
-        outputs = [T.JOINT_STATES, T.ACTUATOR_STATES, T.SHAPE, T.STATUS]
-        self._pose_topics = [T.pose_topic(p.name, i) for i, p in enumerate(self.runner.sample().poses)]
-        outputs += self._pose_topics
-        if self.p.publish_clock:
-            outputs.append(T.CLOCK)
-        try:
-            message_class(T.TF.type)
-            if self._pose_topics:
-                outputs.append(T.TF)
-        except ModuleNotFoundError:
-            pass                    # no tf2_msgs here (PyPI): /tf goes to recordings only
-        for topic in outputs:
-            self._pub[topic.name] = self.node.create_publisher(message_class(topic.type), topic.resolved(n), qos)
+        # -- lifecycle: nothing of the twin exists until configure -----------------------------------
+        self.configured = False
+        self.active = False
+        self.paused = False
+        self.runner = None
+        self.stepper = None
+        self.recorder = None
+        self.rerun = None
+        self._pub: dict = {}
+        self._subs: list = []
         self._diag = None
-        if self.p.diagnostics_rate > 0:
-            self._diag = Diagnostics(self.node, qos, n)
-        self.live = LiveMessages(self.runner.sample())
-        self._subs = []
-        if self.runner.schedule is not None:
-            for topic, kind in _INPUTS:
-                cb = (lambda msg, _t=topic, _k=kind: self._on_command(_t, _k, msg))
-                self._subs.append(self.node.create_subscription(message_class(topic.type), topic.resolved(n), cb, qos))
+        self._threads_started = False
+        self._publisher = None
+        self._summary: dict | None = None
+        self._configure_error: BaseException | None = None
+        self.warmup_s = 0.0
+        self._services = _Services(self)
 
         # -- executor: the C++ events executor, which only moves command messages in ---------------
         try:
@@ -151,46 +144,6 @@ class TwinNode:
             from rclpy.executors import SingleThreadedExecutor
             self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
-
-        # -- recording and viewing ------------------------------------------------------------------
-        self.recorder = None
-        if self.p.record:
-            from .bag.recorder import BagRecorder
-            spec = self.runner.sim.spec
-            # the same keys as an offline run's (ros2_node.bag.run_hook.run_settings), plus the node's
-            settings = {"source": "flexmb node", "solver": dataclasses.asdict(spec),
-                        "runner_options": dataclasses.asdict(options), "dt": repr(float(spec.dt)),
-                        "integrator": spec.integrator, "tolerance": repr(float(spec.tolerance)),
-                        "mode": self.p.mode, "node_name": n, "parameters": dataclasses.asdict(self.p)}
-            self.recorder = BagRecorder(self.p.record, scene_path=self.p.scene, scene_text=None,
-                                        settings=settings, node_name=n, qos_depth=self.p.qos_depth)
-            recorded = [t for t, _ in _INPUTS] + outputs + ([T.TF] if self._pose_topics and T.TF not in outputs else [])
-            for topic in recorded:       # schemas and encoders now, not at a first message mid-loop
-                self.recorder.declare(topic.resolved(n), topic.type)
-        self.rerun = None
-        if self.p.rrd:
-            from .viz.rerun_log import TwinRerunLogger
-            self.rerun = TwinRerunLogger(self.model, rrd_path=self.p.rrd)
-            self.rerun.log_static()
-
-        # -- the publisher's own view of the state: a reporter and a workspace of its own, so it
-        #    never touches the buffers the stepping thread is using -----------------------------------
-        self._reporter = TwinReporter(self.model)
-        self._view = _SnapshotView(self.model, Workspace(self.model))
-        self._view.last = self.runner.sim.last
-        # ... and the executor's, for the answers to commands whose step it ran (Stepper.submit)
-        self._answer_reporter = TwinReporter(self.model)
-        self._answer_view = _SnapshotView(self.model, Workspace(self.model))
-        self._answer_live = LiveMessages(self.runner.sample())
-        self._shells = ShellShapes(self.model)
-        self._member_kinds = self.runner.member_kinds
-
-        # -- the stepping thread ----------------------------------------------------------------------
-        self.stepper = Stepper(self.runner, StepperConfig(
-            mode=self.p.mode, publish_on_command=self.p.publish_on_command, max_lag=self.p.max_lag,
-            margin=self.p.step_margin, duration=self.p.duration, cpu_affinity=_cpus(self.p.cpu_affinity),
-            rt_priority=self.p.rt_priority, window=max(1, int(round(1.0 / self.dt)))), self._wake_publisher)
-        self._set_rates()
 
         # -- counters (publisher thread) ------------------------------------------------------------
         self._callbacks = 0
@@ -210,30 +163,231 @@ class TwinNode:
         self.wall_start = 0.0
         self.wall_stop = 0.0
         self._cpu_start = 0.0
-        self.stop_requested = False
+        self.stop_requested = False             # SIGINT/SIGTERM
+        self.shutdown_requested = False         # the lifecycle shutdown transition
         self.interrupted = False
+        if self.p.autostart:
+            self._autostart()
+
+    def _autostart(self) -> None:
+        """Configure and activate at once (what ``flexmb node`` does unless ``--lifecycle``); a
+        configuration that fails stops the node with its message."""
+        from rclpy.lifecycle import TransitionCallbackReturn
+
+        if self.node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            err = self._configure_error
+            if isinstance(err, FlexmbError):
+                raise err
+            raise FlexmbError(f"{self.fq_name}: configure failed: {type(err).__name__}: {err}") from err
+        if self.node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+            raise FlexmbError(f"{self.fq_name}: activate failed (see the log above)")
+
+    # -- lifecycle transitions (executor thread) ----------------------------------------------------
+    def _on_configure(self) -> bool:
+        """Load, compile, warm up, set the initial state, create the topics and the stepper."""
+        try:
+            self._configure()
+        except Exception as exc:            # reported; the node stays unconfigured
+            self._configure_error = exc
+            self.log.error(f"configure failed: {exc}" if isinstance(exc, FlexmbError)
+                           else f"configure failed: {type(exc).__name__}: {exc}")
+            self._teardown()
+            return False
+        self.configured = True
+        return True
+
+    def _configure(self) -> None:
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        # -- the twin: compile, warm up, initial state (outside any timed loop) ---------------------
+        overrides = {"dt": self.p.dt or None, "integrator": self.p.integrator or None}
+        self.scene_path = self.p.scene
+        scene = load_scene(self.p.scene, overrides)
+        self.model = compile_scene(scene)
+        options = RunnerOptions.from_params(self.p)
+        self.runner = TwinRunner(self.model, options=options)
+        t0 = time.perf_counter()
+        self.runner.start()
+        self.warmup_s = time.perf_counter() - t0
+        self.dt = self.runner.dt
+
+        # -- publishers / subscriptions: names resolved by rclpy (namespace, remapping); QoS from
+        #    the qos_overrides.<topic>.* parameters over these defaults ------------------------------
+        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.p.qos_depth,
+                             reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+        # best effort: matches reliable and best-effort publishers alike (a reliable subscription
+        # silently never hears a best-effort publisher)
+        in_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.p.qos_depth,
+                            reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+        overriding = _overriding()
+        outputs = [T.JOINT_STATES, T.ACTUATOR_STATES, T.SHAPE, T.STATUS]
+        self._pose_topics = [T.pose_topic(p.name, i) for i, p in enumerate(self.runner.sample().poses)]
+        outputs += self._pose_topics
+        if self.p.publish_clock:
+            outputs.append(T.CLOCK)
+        try:
+            message_class(T.TF.type)
+            if self._pose_topics:
+                outputs.append(T.TF)
+        except ModuleNotFoundError:
+            pass                    # no tf2_msgs here (PyPI): /tf goes to recordings only
+        self._names: dict[str, str] = {}          # topic as declared → as resolved
+        for topic in outputs:
+            pub = self.node.create_publisher(message_class(topic.type), topic.name, out_qos,
+                                             qos_overriding_options=overriding)
+            self._pub[topic.name] = pub
+            self._names[topic.name] = pub.topic_name
+        if self.p.diagnostics_rate > 0:
+            self._diag = Diagnostics(self.node, out_qos, self.fq_name.lstrip("/"))
+        self.live = LiveMessages(self.runner.sample(), self.frames)
+        if self.runner.schedule is not None:
+            for topic, kind in _INPUTS:
+                cb = (lambda msg, _t=topic, _k=kind: self._on_command(_t, _k, msg))
+                sub = self.node.create_subscription(message_class(topic.type), topic.name, cb, in_qos,
+                                                    qos_overriding_options=overriding)
+                self._subs.append(sub)
+                self._names[topic.name] = sub.topic_name
+
+        # -- recording and viewing ------------------------------------------------------------------
+        if self.p.record:
+            from .bag.recorder import BagRecorder
+            spec = self.runner.sim.spec
+            n = self.node_name
+            # the same keys as an offline run's (ros2_node.bag.run_hook.run_settings), plus the node's
+            settings = {"source": "flexmb node", "solver": dataclasses.asdict(spec),
+                        "runner_options": dataclasses.asdict(options), "dt": repr(float(spec.dt)),
+                        "integrator": spec.integrator, "tolerance": repr(float(spec.tolerance)),
+                        "mode": self.p.mode, "node_name": n, "node_namespace": self.namespace,
+                        "frames": dataclasses.asdict(self.frames), "parameters": dataclasses.asdict(self.p)}
+            self.recorder = BagRecorder(self.p.record, scene_path=self.p.scene, scene_text=None,
+                                        settings=settings, node_name=n, qos_depth=self.p.qos_depth)
+            recorded = [t for t, _ in _INPUTS] + outputs + ([T.TF] if self._pose_topics and T.TF not in outputs else [])
+            for topic in recorded:       # schemas and encoders now, not at a first message mid-loop
+                self.recorder.declare(self._resolved(topic), topic.type)
+        if self.p.rrd:
+            from .viz.rerun_log import TwinRerunLogger
+            self.rerun = TwinRerunLogger(self.model, rrd_path=self.p.rrd)
+            self.rerun.log_static()
+
+        # -- the publisher's own view of the state: a reporter and a workspace of its own, so it
+        #    never touches the buffers the stepping thread is using -----------------------------------
+        self._reporter = TwinReporter(self.model)
+        self._view = _SnapshotView(self.model, Workspace(self.model))
+        self._view.last = self.runner.sim.last
+        # ... and the executor's, for the answers to commands whose step it ran (Stepper.submit)
+        self._answer_reporter = TwinReporter(self.model)
+        self._answer_view = _SnapshotView(self.model, Workspace(self.model))
+        self._answer_live = LiveMessages(self.runner.sample(), self.frames)
+        self._shells = ShellShapes(self.model)
+        self._member_kinds = self.runner.member_kinds
+
+        # -- the stepping thread (started on activate) -----------------------------------------------
+        self.stepper = Stepper(self.runner, StepperConfig(
+            mode=self.p.mode, publish_on_command=self.p.publish_on_command, max_lag=self.p.max_lag,
+            margin=self.p.step_margin, duration=self.p.duration, cpu_affinity=_cpus(self.p.cpu_affinity),
+            rt_priority=self.p.rt_priority, window=max(1, int(round(1.0 / self.dt)))), self._wake_publisher)
+        self._set_rates()
+        self._prime()
         self.log.info(f"scene '{self.model.scene.name}': {self.model.ndof} DOFs, {self.model.actuators.l0.size} "
                       f"actuators, Δt = {self.dt:g} s, mode {self.p.mode}, warm-up {self.warmup_s:.2f} s; "
-                      f"commands on {T.COMMANDS.resolved(n)}, {T.ACTUATOR_COMMANDS.resolved(n)}, "
-                      f"{T.TRAJECTORY.resolved(n)}")
+                      f"commands on {', '.join(self._resolved(t) for t, _ in _INPUTS)}")
+
+    def _resolved(self, topic: T.Topic) -> str:
+        """A topic's name as rclpy resolved it (namespace, remapping), for the recordings."""
+        name = self._names.get(topic.name)
+        return name if name is not None else self.node.resolve_topic_name(topic.name)
+
+    def _on_activate(self) -> bool:
+        if not self._threads_started:
+            self._start_threads()
+        else:
+            self.stepper.release()
+        self.paused = False
+        self.active = True
+        return True
+
+    def _on_deactivate(self) -> bool:
+        self.active = False
+        self.stepper.hold()
+        return True
+
+    def _on_cleanup(self) -> bool:
+        self.active = False
+        self._stop_threads()
+        self._summary = self.summary()
+        self._teardown()
+        return True
+
+    def _start_threads(self) -> None:
+        # Everything allocated so far lives as long as the node: keep the cyclic collector off it,
+        # so that no collection of the whole heap stalls a thread mid-run.
+        gc.collect()
+        gc.freeze()
+        # The stepping thread needs the GIL for the few Python lines around its numba call: let
+        # another thread keep it at most this long (default 5 ms, five steps at 1 kHz).
+        self._switch = sys.getswitchinterval()
+        sys.setswitchinterval(_SWITCH_INTERVAL)
+        self._publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
+        self.wall_start = time.perf_counter()
+        self._cpu_start = time.process_time()
+        self.stepper.start()
+        self._publisher.start()
+        self._threads_started = True
+        for w in self.stepper.warnings:
+            self.log.warning(w)
+        for note in self.stepper.notes:
+            self.log.info(note)
+
+    def _stop_threads(self) -> None:
+        if not self._threads_started:
+            return
+        self.stepper.stop()
+        self.wall_stop = time.perf_counter()
+        self._publisher.join(10.0)
+        self._drain_outbox()            # anything the publisher had not reached (it stopped)
+        sys.setswitchinterval(self._switch)
+        gc.unfreeze()
+        self._threads_started = False
+
+    def _teardown(self) -> None:
+        """Drop what configure made (topics, recording, rerun log, the twin)."""
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder = None
+        if self.rerun is not None:
+            self.rerun.close()
+            self.rerun = None
+        for pub in self._pub.values():
+            self.node.destroy_publisher(pub)
+        for sub in self._subs:
+            self.node.destroy_subscription(sub)
+        if self._diag is not None:
+            self.node.destroy_publisher(self._diag._pub)
+        self._pub, self._subs, self._diag = {}, [], None
+        self._listened = {}
+        self.stepper = None
+        self.runner = None
+        self.configured = False
 
     # -- parameters that may change at run time ----------------------------------------------------
     def _set_rates(self) -> None:
         cfg = self.stepper.cfg
         cfg.publish_every = max(1, int(round(1.0 / (self.p.publish_rate * self.dt))))
         cfg.shape_every = 0 if self.p.shape_rate <= 0 else max(1, int(round(1.0 / (self.p.shape_rate * self.dt))))
+        cfg.clock_every = max(1, int(round(1.0 / (self.p.clock_rate * self.dt)))) if self.p.publish_clock else 0
         cfg.publish_on_command = self.p.publish_on_command
 
     def _on_set_parameters(self, params):
         from rcl_interfaces.msg import SetParametersResult
 
-        from .params import check
+        from .params import BY_NAME, check
         try:
             for prm in params:
-                setattr(self.p, prm.name, check(prm.name, prm.value))
+                if prm.name in BY_NAME:       # else ROS's own (use_sim_time, qos_overrides.*)
+                    setattr(self.p, prm.name, check(prm.name, prm.value))
         except FlexmbError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        if hasattr(self, "stepper"):
+        if getattr(self, "stepper", None) is not None:
             self._set_rates()
         return SetParametersResult(successful=True)
 
@@ -246,10 +400,14 @@ class TwinNode:
 
     def _on_command(self, topic: T.Topic, kind: str, msg) -> None:
         t_recv = time.perf_counter()
+        if not self.active:
+            self._warn("inactive", f"{self._names[topic.name]}: ignored: the node is inactive (lifecycle); "
+                       "activate it to command the twin")
+            return
         self._callbacks += 1
         self._last_command_wall = t_recv
         d = to_dict(msg) if self.recorder is not None else msg
-        snap = self.stepper.submit(topic.resolved(self.node_name), kind, d, t_recv, topic)
+        snap = self.stepper.submit(self._names[topic.name], kind, d, t_recv, topic)
         if snap is not None and snap.answered:
             self._answer(snap)
 
@@ -285,7 +443,7 @@ class TwinNode:
             if msg is not None:
                 pub.publish(msg)
         if self.recorder is not None:
-            self.recorder.write(topic.resolved(self.node_name), topic.type, make_dict(), t)
+            self.recorder.write(self._resolved(topic), topic.type, make_dict(), t)
 
     def _rtf(self) -> float:
         w = self._rtf_window
@@ -329,7 +487,7 @@ class TwinNode:
         if not s.is_finite():       # never publish NaN (the runner rolls such steps back already)
             self._warn("nan", f"non-finite output at t = {t:.6g} s withheld")
             return
-        live = self.live
+        live, frames = self.live, self.frames
         message = snap.message
         answer = snap.on_command and not snap.answered
         if answer:                  # the state that answers a command: its latency, measured here
@@ -341,22 +499,21 @@ class TwinNode:
         if snap.due or snap.on_command or snap.ack:
             # the status first: it echoes the command's stamp, the acknowledgement clients wait for
             timing = self._timing(snap, message)
-            self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing), t)
+            self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing, frames), t)
         if snap.due or snap.on_command:
-            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s), t)
+            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s, frames), t)
         self._live = live_now
         if snap.due:
-            self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s), t)
+            self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s, frames), t)
             for i, topic in enumerate(self._pose_topics):
-                self._out(topic, lambda i=i: live.fill_pose(s, i), lambda i=i: M.platform_pose(s, i), t)
+                self._out(topic, lambda i=i: live.fill_pose(s, i), lambda i=i: M.platform_pose(s, i, frames), t)
             if self._pose_topics:
-                self._out(T.TF, lambda: live.fill_tf(s) if live.tf_msg is not None else None, lambda: M.tf(s), t)
-            if self.p.publish_clock:
-                self._out(T.CLOCK, lambda: live.fill_clock(t), lambda: M.clock(t), t)
+                self._out(T.TF, lambda: live.fill_tf(s) if live.tf_msg is not None else None,
+                          lambda: M.tf(s, frames), t)
             self._published += 1
         if snap.shape_due:
             kinds, shells = self._member_kinds, self._shells
-            self._out(T.SHAPE, lambda: live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells), t)
+            self._out(T.SHAPE, lambda: live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells, frames), t)
             if self.rerun is not None:
                 self.rerun.log_sample(s, {"step_wall_time": snap.step_wall, "real_time_factor": self._rtf(),
                                           "message": message}, shells)
@@ -379,9 +536,14 @@ class TwinNode:
             events.append(out.popleft())
         slots = self.stepper.slots
         newest = max((i for i, ev in enumerate(events) if ev[0] == "out"), default=-1)
+        newest_clock = max((i for i, ev in enumerate(events) if ev[0] == "clock"), default=-1)
         for i, ev in enumerate(events):
             if ev[0] == "cmd":
                 self._on_command_event(*ev[1:])
+                continue
+            if ev[0] == "clock":
+                self._live, t = i == newest_clock, ev[1]
+                self._out(T.CLOCK, lambda: self.live.fill_clock(t), lambda: M.clock(t), t)
                 continue
             snap = slots[ev[1]]
             if snap.seq != ev[2]:
@@ -433,7 +595,7 @@ class TwinNode:
                     self._check_health()
                     if self._diag is not None:
                         self._diag.publish(self)
-                if self.p.mode == "lockstep" and now - last_beat > _HEARTBEAT:
+                if self.p.mode == "lockstep" and self.active and now - last_beat > _HEARTBEAT:
                     last_beat = now
                     self._heartbeat()
                 if self.stepper.finished.is_set() and not self.stepper.outbox:
@@ -453,7 +615,7 @@ class TwinNode:
         view.state = snap.state
         s = self._reporter.read(view, False)
         timing = self._timing(snap, "")
-        self._out(T.STATUS, lambda: self.live.fill_status(s, timing), lambda: M.status(s, timing), s.t)
+        self._out(T.STATUS, lambda: self.live.fill_status(s, timing), lambda: M.status(s, timing, self.frames), s.t)
         if self.p.publish_clock:
             self._out(T.CLOCK, lambda: self.live.fill_clock(s.t), lambda: M.clock(s.t), s.t)
 
@@ -483,8 +645,10 @@ class TwinNode:
         self.stop_requested = True
 
     def _done(self) -> bool:
-        if self.stop_requested or not self.context.ok() or self.stepper.finished.is_set():
+        if self.stop_requested or self.shutdown_requested or not self.context.ok():
             return True
+        if self.stepper is not None and self.stepper.finished.is_set():
+            return True                      # duration reached (or the stepping thread failed)
         if (self.p.mode == "lockstep" and self.p.idle_timeout > 0 and self._last_command_wall is not None
                 and time.perf_counter() - self._last_command_wall > self.p.idle_timeout):
             self.log.info(f"no command for {self.p.idle_timeout} s: stopping")
@@ -495,53 +659,37 @@ class TwinNode:
         """Run until ``duration`` or shutdown (SIGINT/SIGTERM); returns the summary."""
         from rclpy.executors import ExternalShutdownException
 
-        self._prime()
-        # Everything allocated so far lives as long as the node: keep the cyclic collector off it,
-        # so that no collection of the whole heap stalls a thread mid-run.
-        gc.collect()
-        gc.freeze()
-        # The stepping thread needs the GIL for the few Python lines around its numba call: let
-        # another thread keep it at most this long (default 5 ms, five steps at 1 kHz).
-        switch = sys.getswitchinterval()
-        sys.setswitchinterval(_SWITCH_INTERVAL)
-        publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
-        self.wall_start = time.perf_counter()
-        self._cpu_start = time.process_time()
+        errors = ()
         try:
-            self.stepper.start()
-            publisher.start()
-            for w in self.stepper.warnings:
-                self.log.warning(w)
-            for note in self.stepper.notes:
-                self.log.info(note)
             while not self._done():
                 self.executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
             self.stop_requested = True
         finally:
             self.interrupted = self.stop_requested or not self.context.ok()
-            self.stepper.stop()
-            self.wall_stop = time.perf_counter()
-            publisher.join(10.0)
-            self._drain_outbox()            # anything the publisher had not reached (it stopped)
-            sys.setswitchinterval(switch)
-            gc.unfreeze()
-            summary = self.summary()
+            if self.configured:
+                self._stop_threads()
+                errors = (("stepping", self.stepper.error), ("publisher", self.publisher_error))
+                self._summary = self.summary()
+            summary = self._summary or self.summary()
             self.close()
-        for what, err in (("stepping", self.stepper.error), ("publisher", self.publisher_error)):
+        for what, err in errors:
             if err is not None:
                 raise FlexmbError(f"the {what} thread stopped: {type(err).__name__}: {err}") from err
         return summary
 
     # -- end ------------------------------------------------------------------------------------------
     def summary(self) -> dict:
+        if self.runner is None:               # never configured (or cleaned up without a run)
+            return {"node_name": self.node_name, "namespace": self.namespace, "configured": False,
+                    "interrupted": self.interrupted}
         c = self.runner.counters
         st = self.stepper.stats
         wall = max(self.wall_stop - self.wall_start, 1e-12)
         steps_wall = self.stepper.step_walls.total
         return {
             "scene": self.model.scene.name, "scene_file": str(self.scene_path), "mode": self.p.mode, "dt": self.dt,
-            "node_name": self.node_name, "steps": c.steps, "steps_advanced": st.steps_advanced,
+            "node_name": self.node_name, "namespace": self.namespace, "steps": c.steps, "steps_advanced": st.steps_advanced,
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
@@ -564,12 +712,7 @@ class TwinNode:
         return {"process": proc, "solver_steps": solver, "beyond_solver_core_fraction": (proc - solver) / wall}
 
     def close(self) -> None:
-        if self.recorder is not None:
-            self.recorder.close()
-            self.recorder = None
-        if self.rerun is not None:
-            self.rerun.close()
-            self.rerun = None
+        self._teardown()
         try:
             self.executor.remove_node(self.node)
         except Exception:
@@ -606,10 +749,13 @@ class Diagnostics:
     """``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): solver health, deadlines, commands."""
 
     def __init__(self, node, qos, node_name: str):
+        """``node_name``: the node's fully qualified name without its leading '/' (each entry's
+        name starts with it, so twins in two namespaces stay apart on the global topic)."""
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
         self._types = (DiagnosticArray, DiagnosticStatus, KeyValue)
-        self._pub = node.create_publisher(DiagnosticArray, T.DIAGNOSTICS.resolved(node_name), qos)
+        self._pub = node.create_publisher(DiagnosticArray, T.DIAGNOSTICS.name, qos,
+                                          qos_overriding_options=_overriding())
         self._name = node_name
 
     def publish(self, twin: "TwinNode") -> None:
@@ -672,3 +818,157 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def frame_prefix(value: str, namespace: str) -> str:
+    """The ``frame_prefix`` parameter's prefix: ``auto`` → the namespace without its leading '/'
+    plus '/' (``/robot1`` → ``robot1/``; the root namespace → ``''``); anything else as given."""
+    if value != "auto":
+        return value
+    ns = namespace.strip("/")
+    return f"{ns}/" if ns else ""
+
+
+def _overriding():
+    """QoS overriding options of every topic: ROS 2's ``qos_overrides.<topic>.publisher|subscription.
+    <policy>`` parameters (history, depth, reliability, durability) override the defaults."""
+    from rclpy.qos import QoSPolicyKind
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+
+    return QoSOverridingOptions([getattr(QoSPolicyKind, k) for k in _OVERRIDABLE])
+
+
+def _managed_node(twin: TwinNode, node_name: str, context):
+    """An ``rclpy.lifecycle.LifecycleNode`` whose transitions call the twin's ``_on_*`` methods."""
+    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+    ok, failure = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
+
+    class ManagedTwin(LifecycleNode):
+        def on_configure(self, state):
+            return ok if twin._on_configure() else failure
+
+        def on_activate(self, state):
+            twin._on_activate()
+            return super().on_activate(state)
+
+        def on_deactivate(self, state):
+            twin._on_deactivate()
+            return super().on_deactivate(state)
+
+        def on_cleanup(self, state):
+            twin._on_cleanup()
+            return super().on_cleanup(state)
+
+        def on_shutdown(self, state):
+            twin.shutdown_requested = True    # spin() ends, closes the recording, writes the summary
+            return super().on_shutdown(state)
+
+        def on_error(self, state):
+            if twin.configured:
+                twin._on_cleanup()
+            return ok                         # back to unconfigured
+
+    return ManagedTwin(node_name, context=context)
+
+
+class _Services:
+    """``~/reset``, ``~/pause``, ``~/resume`` (``std_srvs/srv/Trigger``) and ``~/step``
+    (``flexmb_msgs/srv/Step``), served on the executor thread. A call the node's state does not
+    allow answers ``success: false`` and says why."""
+
+    def __init__(self, twin: TwinNode):
+        self.twin = twin
+        node = twin.node
+        self.names = {}
+        try:
+            from std_srvs.srv import Trigger
+        except ModuleNotFoundError:
+            twin.log.warning("std_srvs is not installed (pip install ros-std-srvs): no ~/reset, ~/pause, ~/resume")
+        else:
+            for name, cb in (("~/reset", self.reset), ("~/pause", self.pause), ("~/resume", self.resume)):
+                self._serve(Trigger, name, cb)
+        try:
+            from flexmb_msgs.srv import Step
+        except ImportError:
+            twin.log.warning("flexmb_msgs has no srv/Step (rebuild it: make setup): no ~/step")
+        else:
+            self._serve(Step, "~/step", self.step)
+
+    def _serve(self, srv_type, name: str, cb) -> None:
+        self.names[name] = self.twin.node.resolve_service_name(name)
+        self.twin.node.create_service(srv_type, name, lambda req, resp, _n=name: self._call(_n, cb, req, resp),
+                                      qos_profile=_service_qos())
+
+    def _call(self, name: str, cb, request, response):
+        why = cb(request, response)
+        response.success = why is None or why.startswith("ok:")
+        response.message = why[4:] if why and why.startswith("ok:") else why or "ok"
+        if not response.success:
+            self.twin.log.warning(f"{self.names[name]}: refused: {response.message}")
+        return response
+
+    def _state(self) -> str:
+        t = self.twin
+        return "active" if t.active else ("inactive" if t.configured else "unconfigured")
+
+    def _need(self, active: bool) -> str | None:
+        t = self.twin
+        if not t.configured or (active and not t.active):
+            return (f"the node is {self._state()} (lifecycle); "
+                    f"{'configure and activate' if not t.configured else 'activate'} it first")
+        return None
+
+    def reset(self, request, response) -> str | None:
+        t = self.twin
+        why = self._need(active=False)
+        if why:
+            return why
+        if t.recorder is not None:
+            return ("the node records to '" + t.p.record[:80] + "': a recording's time cannot go back; "
+                    "reset is refused while recording")
+        t.stepper.reset()
+        t._accepted_wall = 0.0
+        return f"ok:reset to the initial state at t = {t.runner.t:g} s"
+
+    def pause(self, request, response) -> str | None:
+        t = self.twin
+        why = self._need(active=True)
+        if why:
+            return why
+        t.paused = True
+        t.stepper.hold()
+        return f"ok:paused at t = {t.runner.t:.9g} s (commands are still applied; ~/step advances, ~/resume runs)"
+
+    def resume(self, request, response) -> str | None:
+        t = self.twin
+        why = self._need(active=True)
+        if why:
+            return why
+        t.paused = False
+        t.stepper.release()
+        return f"ok:running from t = {t.runner.t:.9g} s"
+
+    def step(self, request, response) -> str | None:
+        t = self.twin
+        response.sim_time = t.runner.t if t.runner is not None else 0.0
+        why = self._need(active=True)
+        if why:
+            return why
+        if t.p.mode == "realtime" and not t.paused:
+            return "the twin runs in realtime (it steps on the wall clock); call ~/pause first"
+        n = int(request.steps)
+        if not 1 <= n <= MAX_STEP_SERVICE:
+            return f"steps: expected 1 to {MAX_STEP_SERVICE}, got {n}"
+        done, message = t.stepper.step_n(n)
+        response.steps_done = done
+        response.sim_time = t.runner.t
+        if done < n:
+            return f"{done} of {n} steps advanced, t = {t.runner.t:.9g} s: {message}"
+        return f"ok:{n} steps, t = {t.runner.t:.9g} s"
+
+
+def _service_qos():
+    from rclpy.qos import qos_profile_services_default
+
+    return qos_profile_services_default

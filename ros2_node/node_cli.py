@@ -21,7 +21,8 @@ from . import topics as T
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
                "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
-               "step-margin", "cpu-affinity", "rt-priority", "diagnostics-rate")
+               "step-margin", "cpu-affinity", "rt-priority", "diagnostics-rate", "clock-rate", "world-frame",
+               "frame-prefix")
 # exit code of a node stopped by SIGINT/SIGTERM (after closing its recording and writing its summary)
 INTERRUPTED = 130
 
@@ -42,6 +43,8 @@ def cmd_node(args: argparse.Namespace) -> int:
             values[flag.replace("-", "_")] = v
     if args.mcap:
         values["record"] = args.mcap
+    if args.lifecycle:
+        values["autostart"] = False
     summary = run_node(values, node_name=args.name, ros_args=args.ros_args)
     if not args.quiet:
         print(json.dumps(summary, indent=2))
@@ -171,8 +174,9 @@ def cmd_replay_live(args: argparse.Namespace) -> int:
 
 def register(verbs, run_parser) -> None:
     n = verbs.add_parser("node", help="run the twin as a ROS 2 node (rclpy, DDS on localhost)",
-                         description="The flexmb twin node. Parameters can also be set with "
-                                     "--ros-args -p name:=value (they win over the flags).")
+                         description="The flexmb twin node (a managed lifecycle node, active at start unless "
+                                     "--lifecycle). Parameters can also be set with --ros-args -p name:=value "
+                                     "(they win over the flags); --ros-args -r __ns:=/robot1 namespaces it.")
     n.add_argument("scene")
     n.add_argument("--name", default=T.DEFAULT_NODE_NAME, help="node name (private topics live under it)")
     n.add_argument("--mode", choices=("realtime", "lockstep"))
@@ -195,6 +199,11 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread "
                    "(0: normal scheduling; default -1: 20 where the OS allows it)")
     n.add_argument("--diagnostics-rate", type=float, help="Hz of /diagnostics (default 1; 0 disables)")
+    n.add_argument("--clock-rate", type=float, help="Hz (simulated time) of /clock (default 100)")
+    n.add_argument("--world-frame", help="frame_id of headers, parent of the /tf transforms (default world)")
+    n.add_argument("--frame-prefix", help="prefix of the platforms' frames (default auto: the namespace + '/')")
+    n.add_argument("--lifecycle", action="store_true", help="start unconfigured: a lifecycle manager (or "
+                   "lifecycle_msgs/srv/ChangeState calls) configures and activates the node")
     n.add_argument("--quiet", action="store_true", help="do not print the summary")
     n.add_argument("--ros-args", nargs=argparse.REMAINDER, default=None, help="ROS arguments (e.g. -p dt:=0.002)")
     n.set_defaults(func=cmd_node, record=None)

@@ -11,6 +11,8 @@ from dataclasses import dataclass, fields
 
 from flexmb_core.errors import FlexmbError
 
+from .topics import WORLD_FRAME
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -57,8 +59,21 @@ SPECS: tuple[ParamSpec, ...] = (
               "servo (a servo's max_rate is their limit)", low=1e-9, high=1e6),
     ParamSpec("max_trajectory_points", 10000, "joint trajectories with more points are rejected", low=1,
               high=10_000_000),
-    ParamSpec("qos_depth", 10, "history depth of every publisher and subscription", low=1, high=100000),
+    ParamSpec("joint_command_stamps", False, "false: ~/joint_commands (JointState) apply on arrival, their stamp "
+              "ignored (topic_based_ros2_control stamps with its controller manager's clock); true: their stamps "
+              "are checked and used as ~/actuator_commands' are"),
+    ParamSpec("qos_depth", 10, "history depth of every publisher and subscription (a qos_overrides.<topic>."
+              "publisher|subscription.depth parameter overrides it per topic)", low=1, high=100000),
     ParamSpec("publish_clock", True, "publish /clock with the simulated time (the node owns time)"),
+    ParamSpec("clock_rate", 100.0, "rate (Hz of simulated time) of /clock, independent of publish_rate",
+              low=1.0, high=100000.0, read_only=False),
+    ParamSpec("world_frame", WORLD_FRAME, "frame_id of every header and parent frame of every transform (used as "
+              "given, without frame_prefix)"),
+    ParamSpec("frame_prefix", "auto", "prepended to the frames the twin names (its platforms, the /tf child "
+              "frames); auto: the node's namespace without its leading '/' plus '/' ('robot1/' under /robot1, "
+              "nothing at the root); any other string is used as given ('' for none)"),
+    ParamSpec("autostart", True, "configure and activate the (managed) node at start; false: it starts "
+              "unconfigured and waits for lifecycle transitions (flexmb node --lifecycle)"),
     ParamSpec("duration", 0.0, "stop after this much simulated time (s); 0 = run until shutdown", low=0.0,
               high=1e9),
     ParamSpec("idle_timeout", 0.0, "lockstep: stop after this many wall seconds without a command once "
@@ -99,8 +114,13 @@ class NodeParams:
     command_hold: str = "smooth"
     max_command_rate: float = 10.0
     max_trajectory_points: int = 10000
+    joint_command_stamps: bool = False
     qos_depth: int = 10
     publish_clock: bool = True
+    clock_rate: float = 100.0
+    world_frame: str = WORLD_FRAME
+    frame_prefix: str = "auto"
+    autostart: bool = True
     duration: float = 0.0
     idle_timeout: float = 0.0
     max_lag: float = 0.1
@@ -147,4 +167,17 @@ def check(name: str, value):
         raise FlexmbError(f"parameter '{name}': expected one of {list(spec.choices)}, got {value!r}")
     if spec.low is not None and value < spec.low or spec.high is not None and value > spec.high:
         raise FlexmbError(f"parameter '{name}': expected a value in [{spec.low}, {spec.high}], got {value!r}")
+    if name in _FRAMES:
+        _check_frame(name, value)
     return value
+
+
+_FRAMES = ("world_frame", "frame_prefix")
+
+
+def _check_frame(name: str, value: str) -> None:
+    """tf2 frame ids: no leading '/', no whitespace; the world frame not empty."""
+    if (name == "world_frame" and not value) or value.startswith("/") or any(c.isspace() for c in value):
+        raise FlexmbError(f"parameter '{name}': expected a tf2 frame {'prefix' if name == 'frame_prefix' else 'id'} "
+                          f"(no leading '/', no spaces{', not empty' if name == 'world_frame' else ''}), "
+                          f"got {value[:40]!r}")

@@ -18,6 +18,15 @@ wall clock, so a command is answered within one step's compute time instead of w
 next tick. A step that ends after its deadline is a deadline miss;
 one that ends more than ``max_lag`` late re-anchors the clock (an overrun) instead of bursting.
 ``lockstep``: one step per command, as soon as it arrives.
+
+Holding (:meth:`Stepper.hold`: the node's ``~/pause`` and lifecycle deactivation) stops the steps
+with the state kept; commands are still applied (a lockstep command then owes no step), and
+:meth:`Stepper.step_n` takes N steps at once (``~/step``). :meth:`Stepper.release` re-anchors the
+wall clock at the state in hand, so a held twin does not count the pause as lateness.
+:meth:`Stepper.reset` puts the runner back to its initial state (``~/reset``).
+
+``/clock`` goes out at its own decimation (``clock_every`` steps) as a light ``("clock", t)`` event
+in the outbox, apart from the state snapshots.
 """
 
 from __future__ import annotations
@@ -118,6 +127,7 @@ class StepperConfig:
     mode: str = "realtime"
     publish_every: int = 1           # steps between two state publications
     shape_every: int = 0             # steps between two shapes (0: never)
+    clock_every: int = 0             # steps between two /clock publications (0: never)
     publish_on_command: bool = True
     max_lag: float = 0.1             # s
     margin: float = 4.0e-4           # s before a deadline at which an idle step starts
@@ -178,8 +188,8 @@ class Stepper:
         self.cfg = config
         self.dt = runner.dt
         self._notify = notify
-        # ("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag) | ("out", slot, seq), in
-        # the order things happened (appended under the lock)
+        # ("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag) | ("out", slot, seq) |
+        # ("clock", t), in the order things happened (appended under the lock)
         self.outbox: collections.deque = collections.deque()
         self._lock = threading.Lock()         # a command application and a step exclude each other
         self._pending = 0                     # commands applied since the last step began
@@ -188,6 +198,7 @@ class Stepper:
         self._t0 = 0.0                        # wall time of state 0 (perf_counter; re-anchored on overruns)
         self._n = 0                           # states since t0
         self._running = False                 # the realtime loop has set t0
+        self._held = False                    # no steps (paused or inactive); commands still apply
         self.stop_event = threading.Event()
         self.finished = threading.Event()
         st = runner.sim.state
@@ -208,9 +219,66 @@ class Stepper:
     def start(self) -> None:
         """Queue the initial state, start the thread; returns once its scheduling is set (the
         warnings of what the OS refused are in :attr:`warnings` then)."""
-        self._snapshot(self.runner.sim.last, False, "", 0.0, 0.0, True, True, False, False)
+        self._initial_events()
         self._thread.start()
         self._ready.wait(5.0)
+
+    def _initial_events(self) -> None:
+        """The state in hand (at start or after a reset) queued for publication, with its /clock."""
+        self._snapshot(self.runner.sim.last, False, "", 0.0, 0.0, True, True, False, False)
+        if self.cfg.clock_every:
+            self.outbox.append(("clock", self.runner.t))
+
+    @property
+    def held(self) -> bool:
+        return self._held
+
+    def hold(self) -> None:
+        """No more steps from now on (the one under way ends first); the state is kept."""
+        with self._lock:
+            self._held = True
+            self._pending = 0
+        self.wake.set()
+
+    def release(self) -> None:
+        """Step again, the wall clock re-anchored at the state in hand (a hold is no lateness)."""
+        with self._lock:
+            self._held = False
+            self._pending = 0
+            self._t0 = time.perf_counter() - self._n * self.dt
+        self.wake.set()
+
+    def step_n(self, n: int) -> tuple[int, str]:
+        """``n`` steps at once on the calling thread, unpaced (lockstep); the last one's state is
+        published (status and joint states). Returns (steps that advanced, the last failure's
+        message or ''). Stops early at ``duration``."""
+        advanced, message = 0, ""
+        with self._lock:
+            for i in range(n):
+                if self._done():
+                    message = message or f"duration {self.cfg.duration:g} s reached"
+                    break
+                before = self.stats.steps_advanced
+                _, snap = self._step(math.inf, ack=i == n - 1, due=i == n - 1)
+                self._n += 1
+                if self.stats.steps_advanced > before:
+                    advanced += 1
+                elif snap is not None and snap.message:
+                    message = snap.message
+        self._notify()
+        return advanced, message
+
+    def reset(self) -> None:
+        """The runner back to its initial state (:meth:`TwinRunner.reset`), the wall clock
+        re-anchored there and the initial state queued for publication."""
+        with self._lock:
+            self.runner.reset()
+            self._n = 0
+            self._pending = 0
+            self._new_command = False
+            self._t0 = time.perf_counter()
+            self._initial_events()
+        self.wake.set()
 
     def stop(self, timeout: float = 5.0) -> None:
         self.stop_event.set()
@@ -239,6 +307,9 @@ class Stepper:
                 self._new_command = True
                 self._cmd_recv_wall = recv_wall
             self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
+            if self._held:                      # applied; no step owed (~/step takes them)
+                self._notify()
+                return None
             self._pending += 1
             if (self.cfg.mode == "realtime" and self._running and not self._done()
                     and time.perf_counter() >= self._t0 + (self._n + 1 - COMMAND_LEAD) * self.dt):
@@ -285,6 +356,10 @@ class Stepper:
             self._n = 0
             self._running = True
         while not self._done():
+            if self._held:
+                wake.clear()
+                wake.wait(0.05)        # release() re-anchors the clock and wakes us
+                continue
             while True:
                 wake.clear()
                 n = self._n            # a command may have taken this step on its own thread
@@ -296,11 +371,14 @@ class Stepper:
                     break
                 if self.stop_event.is_set():
                     return
+                if self._held:
+                    break
                 wake.wait((earliest if pending else latest) - now)
             if now >= latest + margin:        # behind: the deadline has passed already
                 wake.wait(BEHIND_PAUSE)
             with lock:
-                if self._n == n and not self._done():     # else a command's thread stepped meanwhile
+                # else a command's thread stepped meanwhile, or the twin was held
+                if self._n == n and not self._done() and not self._held:
                     self._pending = 0
                     self._step_paced(answered=False)
 
@@ -318,7 +396,7 @@ class Stepper:
     def _loop_lockstep(self) -> None:
         while not self._done():
             self.wake.clear()
-            if not self._pending:
+            if not self._pending or self._held:
                 self.wake.wait(0.05)
                 continue
             with self._lock:
@@ -327,10 +405,12 @@ class Stepper:
                 self._n += 1
 
     # -- one step ----------------------------------------------------------------------------------
-    def _step(self, deadline: float, ack: bool = False, answered: bool = False) -> tuple[float, Snapshot | None]:
+    def _step(self, deadline: float, ack: bool = False, answered: bool = False,
+              due: bool = False) -> tuple[float, Snapshot | None]:
         """One step, its timing, and a snapshot when something is due; returns its end
         (perf_counter) and the snapshot queued, if any. ``answered``: the caller publishes the
-        answer to the command itself (see :meth:`submit`)."""
+        answer to the command itself (see :meth:`submit`); ``due``: publish this state whatever
+        the decimation."""
         runner, cfg = self.runner, self.cfg
         a = time.perf_counter()
         outcome = runner.step()
@@ -351,7 +431,7 @@ class Stepper:
             self.stats.steps_advanced += 1
         k = self.stats.steps_advanced
         on_command = cfg.publish_on_command and self._new_command and outcome.advanced
-        due = k % cfg.publish_every == 0 or not outcome.advanced
+        due = due or k % cfg.publish_every == 0 or not outcome.advanced
         shape_due = bool(cfg.shape_every) and k % cfg.shape_every == 0
         message = outcome.message if (not outcome.converged or outcome.message) else ""
         snap = None
@@ -360,6 +440,10 @@ class Stepper:
                                   ack, answered and on_command)
             if on_command:
                 self._new_command = False
+        if cfg.clock_every and (k % cfg.clock_every == 0 or not outcome.advanced):
+            self.outbox.append(("clock", runner.t))
+            if snap is None or not answered:       # an answering caller notifies once it is done
+                self._notify()
         return b, snap
 
     def _snapshot(self, result, advanced, message, wall, late, due, shape_due, on_command, ack,

@@ -21,7 +21,7 @@ from flexmb_core.report import TwinReporter, TwinSample
 from flexmb_core.scene.schema import SolverSpec
 from flexmb_core.simulator import Simulator
 
-from .commands import HOLDS, CommandSchedule, Rejection
+from .commands import HOLDS, SIZE, CommandSchedule, Rejection
 from .messages import stamp_seconds
 from .shells import ShellShapes
 
@@ -39,6 +39,10 @@ class RunnerOptions:
     command_hold: str = "smooth"          # smooth (C¹) | ramp (linear) | step: see ros2_node.commands
     max_command_rate: float = 10.0        # m/s, commanded rates beyond are rejected (actuators without a servo)
     max_trajectory_points: int = 10000    # longer trajectories are rejected
+    # JointState commands (~/joint_commands): False applies them on arrival (their stamp ignored, as
+    # topic_based_ros2_control stamps with its controller manager's clock); True checks and uses the
+    # stamp like an ActuatorCommand's
+    joint_command_stamps: bool = False
 
     @classmethod
     def from_params(cls, p) -> "RunnerOptions":
@@ -47,7 +51,7 @@ class RunnerOptions:
         return cls(command_source=p.command_source, command_timeout=p.command_timeout,
                    timeout_behaviour=p.command_timeout_behaviour, ramp_time=p.ramp_time, stale_after=p.stale_after,
                    max_lead=p.max_lead, command_hold=p.command_hold, max_command_rate=p.max_command_rate,
-                   max_trajectory_points=p.max_trajectory_points)
+                   max_trajectory_points=p.max_trajectory_points, joint_command_stamps=p.joint_command_stamps)
 
     def validate(self) -> None:
         if self.command_source not in ("external", "scene"):
@@ -142,6 +146,16 @@ class TwinRunner:
         self._backup = self.sim.state.copy()
         return self.sample()
 
+    def reset(self) -> TwinSample:
+        """Back to the initial state, as :meth:`start` left it (``t`` = 0, the scene's
+        ``initial_state``, the commands at their start lengths, the counters at zero): a fresh
+        :class:`Simulator` of the same model and solver settings (its kernels are compiled already,
+        so no warm-up), so that the steps after a reset repeat the steps after the start bit for bit."""
+        self.sim = Simulator(self.model, self.sim.spec)
+        self.counters = RunnerCounters()
+        self.schedule = None
+        return self.start(warmup=False)
+
     # -- inputs (return None when accepted) ----------------------------------------------------
     def _count(self, r: Rejection | None) -> Rejection | None:
         if r is not None:
@@ -163,6 +177,22 @@ class TwinRunner:
 
     def command_trajectory(self, topic: str, names, stamp: float, points) -> Rejection | None:
         return self._count(self._need_schedule(topic).command_trajectory(topic, names, stamp, points, self.t))
+
+    def command_joint_state(self, topic: str, names, positions, velocities, efforts,
+                            stamp: float = 0.0) -> Rejection | None:
+        """A ``sensor_msgs/JointState`` command (the ``topic_based_ros2_control`` convention):
+        ``names`` some actuators in any order, ``positions (k,)`` their lengths (m), ``velocities``
+        empty or ``(k,)`` rates (m/s); efforts must be empty (the actuators are length-controlled)."""
+        schedule = self._need_schedule(topic)
+        if len(efforts):
+            return self._count(schedule._reject(Rejection(
+                topic, SIZE, f"effort has {len(efforts)} values; the twin's actuators take position (length, m) "
+                "commands, optionally with velocity (m/s), so effort must be empty")))
+        if len(names) and not len(positions):
+            return self._count(schedule._reject(Rejection(
+                topic, SIZE, f"{len(names)} names but no position; the twin's actuators take position (length, m) "
+                "commands — a velocity-only command is not supported")))
+        return self.command_named(topic, names, positions, velocities, stamp)
 
     @property
     def rejected_commands(self) -> int:
@@ -218,8 +248,9 @@ class TwinRunner:
 def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:
     """Feed one decoded command message (rclpy message or dict) to the runner.
 
-    ``topic_kind`` is ``commands`` (Float64MultiArray), ``actuator_commands`` (ActuatorCommand) or
-    ``joint_trajectory`` (JointTrajectory).
+    ``topic_kind`` is ``commands`` (Float64MultiArray), ``actuator_commands`` (ActuatorCommand),
+    ``joint_trajectory`` (JointTrajectory) or ``joint_commands`` (JointState: the stamp counts only
+    with the runner option ``joint_command_stamps``, else the command applies on arrival).
     """
     get = (lambda m, k: m[k]) if isinstance(msg, dict) else getattr
     if topic_kind == "commands":
@@ -237,4 +268,8 @@ def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejec
                                              get(p, "velocities")) for p in raw]
         return runner.command_trajectory(topic, list(get(msg, "joint_names")),
                                          stamp_seconds(st), pts)
+    if topic_kind == "joint_commands":
+        stamp = stamp_seconds(get(get(msg, "header"), "stamp")) if runner.options.joint_command_stamps else 0.0
+        return runner.command_joint_state(topic, list(get(msg, "name")), list(get(msg, "position")),
+                                          list(get(msg, "velocity")), list(get(msg, "effort")), stamp)
     raise ValueError(f"unknown command topic kind {topic_kind!r}")

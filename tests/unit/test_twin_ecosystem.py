@@ -1,0 +1,176 @@
+"""Issue 14 without DDS: JointState commands take the path of the other command topics, a reset
+repeats the start bit for bit, the stepper's hold / step N / reset, frame ids and prefixes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexmb_core.model.compile import compile_scene
+from flexmb_core.scene import load_scene
+from flexmb_core.simulator import Simulator
+from ros2_node import messages as M
+from ros2_node.realtime import Stepper, StepperConfig
+from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"
+TOPIC = "/flexmb_twin/joint_commands"
+
+
+@pytest.fixture(scope="module")
+def stewart():
+    model = compile_scene(load_scene(str(SCENE)))
+    return model, Simulator(model)       # the simulator only for the scene's command law L(t)
+
+
+def _joint_state(names, position, velocity=(), effort=(), t=0.0) -> dict:
+    return {"header": M.header(t), "name": list(names), "position": [float(x) for x in position],
+            "velocity": [float(x) for x in velocity], "effort": [float(x) for x in effort]}
+
+
+def _history(runner, commands, send) -> np.ndarray:
+    """(steps, ndof) positions after each step, ``send(runner, lengths)`` applying each command."""
+    out = []
+    for lengths in commands:
+        assert send(runner, lengths) is None
+        runner.step()
+        out.append(runner.sim.state.q.copy())
+    return np.array(out)
+
+
+def _law(program, runner, steps):
+    return [program.command_lengths((k + 1) * runner.dt) for k in range(steps)]
+
+
+def test_joint_state_commands_equal_float64_commands_in_any_order(stewart):
+    model, program = stewart
+    names = list(model.actuators.names)
+    order = [3, 0, 5, 1, 4, 2]
+    a, b = TwinRunner(model), TwinRunner(model)
+    a.start()
+    b.start()
+    law = _law(program, a, 200)
+    qa = _history(a, law, lambda r, L: r.command_array("/flexmb_twin/commands", L))
+    qb = _history(b, law, lambda r, L: apply_message(
+        r, "joint_commands", TOPIC, _joint_state([names[i] for i in order], [L[i] for i in order])))
+    assert np.array_equal(qa, qb)
+    assert a.sample().actuator_commands.tolist() == b.sample().actuator_commands.tolist()
+
+
+def test_joint_state_velocity_is_the_commanded_rate(stewart):
+    model, program = stewart
+    names = list(model.actuators.names)
+    a, b = TwinRunner(model), TwinRunner(model)
+    a.start()
+    b.start()
+    L, v = program.command_lengths(0.0) + 0.001, np.full(6, 0.01)
+    assert a.command_named("/x", names, L, v, 0.0) is None
+    assert apply_message(b, "joint_commands", TOPIC, _joint_state(names, L, v)) is None
+    for r in (a, b):
+        for _ in range(50):
+            r.step()
+    assert np.array_equal(a.sim.state.q, b.sim.state.q)
+
+
+def test_joint_state_subset_keeps_the_other_actuators(stewart):
+    model, program = stewart
+    r = TwinRunner(model)
+    r.start()
+    before = r.sample().actuator_commands.copy()
+    assert apply_message(r, "joint_commands", TOPIC, _joint_state(["leg2"], [before[1] + 0.01])) is None
+    for _ in range(600):
+        r.step()
+    after = r.sample().actuator_commands
+    assert after[1] == pytest.approx(before[1] + 0.01, abs=1e-12)
+    assert np.array_equal(np.delete(after, 1), np.delete(before, 1))
+
+
+@pytest.mark.parametrize("msg,kind,text", [
+    (_joint_state(["leg1", "no_such_leg"], [1.0, 1.0]), "unknown_name", "unknown actuator names [no_such_leg]"),
+    (_joint_state(["leg1"], [1.0], effort=[5.0]), "size", "effort must be empty"),
+    (_joint_state(["leg1"], [], velocity=[0.1]), "size", "velocity-only command is not supported"),
+    (_joint_state(["leg1", "leg2"], [1.0]), "size", "2 names but 1 lengths"),
+    (_joint_state(["leg1"], [2.5]), "stroke", "leg1=2.5 m (stroke [0.65, 1.65] m)"),
+])
+def test_bad_joint_state_commands_are_rejected_naming_topic_and_value(stewart, msg, kind, text):
+    r = TwinRunner(stewart[0])
+    r.start()
+    rej = apply_message(r, "joint_commands", TOPIC, msg)
+    assert rej is not None and rej.kind == kind
+    assert str(rej).startswith(f"{TOPIC}: rejected ({kind}): ") and text in str(rej)
+    assert r.counters.rejections == {kind: 1}
+
+
+def test_joint_state_stamps_only_with_the_option(stewart):
+    """topic_based_ros2_control stamps with its own clock (wall time without use_sim_time): ignored by
+    default, checked like an ActuatorCommand's with joint_command_stamps."""
+    model, program = stewart
+    L = program.command_lengths(0.0)
+    wall_stamped = _joint_state(model.actuators.names, L, t=1.7e9)
+    r = TwinRunner(model)
+    r.start()
+    assert apply_message(r, "joint_commands", TOPIC, wall_stamped) is None
+    s = TwinRunner(model, options=RunnerOptions(joint_command_stamps=True))
+    s.start()
+    rej = apply_message(s, "joint_commands", TOPIC, wall_stamped)
+    assert rej is not None and rej.kind == "future"
+
+
+def test_reset_repeats_the_start_bit_for_bit(stewart):
+    model, program = stewart
+    r = TwinRunner(model)
+    r.start()
+    law = _law(program, r, 150)
+    send = (lambda rr, L: rr.command_array("/flexmb_twin/commands", L))
+    first = _history(r, law, send)
+    assert r.t > 0.1 and r.counters.steps == 150
+    r.reset()
+    assert r.t == 0.0 and r.counters.steps == 0 and r.schedule.accepted == 0
+    second = _history(r, law, send)
+    assert np.array_equal(first, second)
+
+
+def _stepper(model, mode="lockstep"):
+    runner = TwinRunner(model)
+    runner.start()
+    events = []
+    st = Stepper(runner, StepperConfig(mode=mode, publish_every=10, clock_every=5), lambda: events.append(1))
+    return runner, st
+
+
+def test_stepper_hold_step_n_and_reset_without_the_thread(stewart):
+    model, program = stewart
+    runner, st = _stepper(model)
+    st.hold()
+    # a command while held is applied (recorded as an event) but owes no step
+    assert st.submit("/t", "commands", {"data": list(program.command_lengths(0.0) + 0.001)}, 0.0) is None
+    assert runner.counters.steps == 0 and st._pending == 0
+    assert runner.schedule.accepted == 1
+    done, message = st.step_n(25)
+    assert done == 25 and message == "" and runner.t == pytest.approx(25 * runner.dt, abs=1e-15)
+    kinds = [ev[0] for ev in st.outbox]
+    # the command, /clock every 5 steps, states every 10 and the last step's (acknowledged) state
+    assert kinds.count("cmd") == 1 and kinds.count("clock") == 5
+    last = st.slots[st.outbox[-2][1]] if st.outbox[-1][0] == "clock" else st.slots[st.outbox[-1][1]]
+    assert last.ack and last.due and last.state.t == runner.t
+    st.reset()
+    assert runner.t == 0.0 and st._n == 0
+    assert st.outbox[-2][0] == "out" and st.outbox[-1] == ("clock", 0.0)
+
+
+def test_frames_prefix_the_platform_frames_only(stewart):
+    from ros2_node.node import frame_prefix
+    assert frame_prefix("auto", "/") == "" and frame_prefix("auto", "/robot1") == "robot1/"
+    assert frame_prefix("auto", "/a/b") == "a/b/" and frame_prefix("", "/robot1") == ""
+    assert frame_prefix("r2/", "/robot1") == "r2/"
+    r = TwinRunner(stewart[0])
+    s = r.start()
+    frames = M.Frames(world="map", prefix="robot1/")
+    tf = M.tf(s, frames)
+    assert [t["child_frame_id"] for t in tf["transforms"]] == ["robot1/platform"]
+    assert {t["header"]["frame_id"] for t in tf["transforms"]} == {"map"}
+    assert M.platform_pose(s, 0, frames)["header"]["frame_id"] == "map"
+    assert M.joint_state(s)["header"]["frame_id"] == "world"      # the default is unchanged
