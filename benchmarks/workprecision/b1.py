@@ -122,22 +122,28 @@ def make_reference() -> Path:
     return REFERENCE
 
 
-def run(quick: bool, *, budget_s: float, max_repeats: int, log=print) -> list[dict]:
-    """Every variant of the sweep as a CSV row."""
-    _, _, ref = core.read_reference(REFERENCE)
-    forms = closed_forms()
-    rows = []
-    for v in variants(quick):
-        timed = core.timed_run(_start(v, UNTIL), UNTIL, MARK, _tip, budget_s=budget_s, max_repeats=max_repeats)
-        err, _, _ = core.history_error(timed.samples, ref[:, 0], ref[:, 1:], MARK, UNTIL, L)
-        r = core.row(v, **core.timing_columns(timed, UNTIL), error=err)
-        if timed.completed:
-            tip = timed.samples[max(timed.samples)]
-            r.update(error_final=float(np.linalg.norm(tip - forms["flexmb_converged"])) / L,
-                     error_closed_form=float(np.linalg.norm(tip - forms["inextensible"])) / L)
-        rows.append(r)
-        log(_line(r))
-    return rows
+def context(quick: bool) -> dict:
+    """What every run compares with: the stored fine run (t, x, y, z) and the closed forms."""
+    return {"ref": core.read_reference(REFERENCE)[2], "forms": closed_forms()}
+
+
+def variant_row(v: core.Variant, quick: bool, ctx: dict, *, budget_s: float, max_repeats: int) -> dict:
+    """One variant's CSV row."""
+    ref, forms = ctx["ref"], ctx["forms"]
+    timed = core.timed_run(_start(v, UNTIL), UNTIL, MARK, _tip, budget_s=budget_s, max_repeats=max_repeats)
+    err, _, _ = core.history_error(timed.samples, ref[:, 0], ref[:, 1:], MARK, UNTIL, L)
+    r = core.row(v, **core.timing_columns(timed, UNTIL), error=err)
+    if timed.completed:
+        tip = timed.samples[max(timed.samples)]
+        r.update(error_final=float(np.linalg.norm(tip - forms["flexmb_converged"])) / L,
+                 error_closed_form=float(np.linalg.norm(tip - forms["inextensible"])) / L)
+    return r
+
+
+def run(quick: bool, *, budget_s: float, max_repeats: int, log=print, client=None) -> list[dict]:
+    """Every variant of the sweep as a CSV row (on Dask with a ``client``, :func:`core.run_variants`)."""
+    return core.run_variants(NAME, variants(quick), quick, context(quick), budget_s=budget_s,
+                             max_repeats=max_repeats, log=log, line=_line, client=client)
 
 
 def _line(r: dict) -> str:

@@ -3,7 +3,12 @@ schema, the timed flexmb run that samples an output at fixed marks, reference fi
 
 Timing: the wall time of ``Simulator.run`` only (JIT warm-up and initialization excluded), median
 of the repeats; a run is repeated on a fresh simulator while the walls sum to less than the
-repeat budget (at most ``max_repeats`` times). A run that fails (a step that does not converge
+repeat budget (at most ``max_repeats`` times).
+
+Where the runs happen (:func:`run_variants`): one after another in this process (``flexmb bench``,
+``--workers 1``, the default: every run has the process to itself), or each variant a Dask task
+(``--workers N`` / ``--scheduler``, :func:`variant_task`): errors are the same bits either way;
+wall times are those of runs going on at the same time, one per worker process. A run that fails (a step that does not converge
 after the scene's sub-stepping policy) is a row with ``completed = False``, NaN errors and the
 solver's message in ``note``: reported, never dropped.
 """
@@ -11,6 +16,7 @@ solver's message in ``note``: reported, never dropped.
 from __future__ import annotations
 
 import csv
+import importlib
 import math
 import statistics
 import time
@@ -247,3 +253,41 @@ def timing_columns(timed: Timed, until: float) -> dict:
                 wall_per_sim_s=wall / until if ok else math.nan, rtf=until / wall if ok else math.nan,
                 steps_per_s=s["steps"] / wall if ok else math.nan,
                 newton_iterations_mean=s["newton_iterations_mean"], note=timed.message)
+
+
+# -- running a sweep -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantTask:
+    """One run of a case's sweep (picklable: what a Dask task receives). ``context`` is the case's
+    :func:`context` (references, closed forms), computed once by the caller."""
+
+    case: str
+    variant: Variant
+    quick: bool
+    context: dict
+    budget_s: float
+    max_repeats: int
+
+
+def variant_task(task: VariantTask) -> dict:
+    """The CSV row of one variant (the Dask task of ``flexmb bench --workers N``)."""
+    mod = importlib.import_module(f"benchmarks.workprecision.{task.case}")
+    return mod.variant_row(task.variant, task.quick, task.context, budget_s=task.budget_s,
+                           max_repeats=task.max_repeats)
+
+
+def run_variants(case: str, variants: list[Variant], quick: bool, context: dict, *, budget_s: float,
+                 max_repeats: int, log: Callable[[str], None], line: Callable[[dict], str],
+                 client=None) -> list[dict]:
+    """Every variant's row, in ``variants`` order: in this process one after another (``client``
+    None), or all at once as tasks of a Dask ``client``. ``log(line(row))`` as each row arrives."""
+    tasks = [VariantTask(case, v, quick, context, budget_s, max_repeats) for v in variants]
+    if client is None:
+        rows = []
+        for t in tasks:
+            rows.append(variant_task(t))
+            log(line(rows[-1]))
+        return rows
+    from flexmb_core.study.tasks import run_all
+
+    return run_all(client, variant_task, tasks, name=f"flexmb-bench-{case}", on_result=lambda i, r: log(line(r)))

@@ -23,6 +23,12 @@ NUMERIC = {"elements", "order", "rho_inf", "dt", "sim_time_s", "steps", "t_reach
 PEER_STYLE = {"exudyn": ("s", "0.15"), "mujoco": ("D", "tab:red"), "pyelastica": ("^", "tab:purple")}
 
 
+def _used(meta: dict) -> str:
+    """How many runs went at once (``flexmb bench --workers N``; files from before issue 17: one)."""
+    n = meta.get("workers", 1)
+    return "one used" if n == 1 else f"up to {n} runs at a time on Dask workers"
+
+
 def csv_path(out: Path, case: str) -> Path:
     return out / f"workprecision_{case}.csv"
 
@@ -211,7 +217,7 @@ def write_markdown(out: Path, cases: dict) -> Path:
         lines += [f"## {mod.TITLE}", ""]
         m = meta.get("machine", {})
         lines.append(f"Run {meta.get('date', '?')}{' (--quick)' if meta.get('quick') else ''}, commit "
-                     f"{m.get('commit', '?')}, {m.get('cpu', '?')}, {m.get('cpus', '?')} cores (one used), 1-min load "
+                     f"{m.get('commit', '?')}, {m.get('cpu', '?')}, {m.get('cpus', '?')} cores ({_used(meta)}), 1-min load "
                      f"average {meta.get('load_start', '?')} at start, {meta.get('load_end', '?')} at end; "
                      f"{meta.get('runtime_s', 0):.0f} s. Simulated time {meta.get('sim_time_s', '?')} s.")
         lines += ["", f"**error** = {mod.ERROR_MEASURE}. {spec['errors']}", ""]

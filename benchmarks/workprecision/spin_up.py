@@ -101,20 +101,29 @@ def make_reference() -> Path:
     return REFERENCE
 
 
-def run(quick: bool, *, budget_s: float, max_repeats: int, log=print) -> list[dict]:
-    """Every variant of the sweep as a CSV row."""
-    _, _, ref = core.read_reference(REFERENCE)
-    t_end = until(quick)
-    rows = []
-    for v in variants(quick):
-        timed = core.timed_run(_start(v, t_end), t_end, MARK, _tip, budget_s=budget_s, max_repeats=max_repeats)
-        err, final, _ = core.history_error(timed.samples, ref[:, 0], ref[:, 1:], MARK, t_end, L)
-        r = core.row(v, **core.timing_columns(timed, t_end), error=err, error_final=final)
-        rows.append(r)
-        log(f"  {r['code']:10s} {r['family']:44s} Δt {r['dt']:<8.3g} {r['steps_per_s']:8.0f} steps/s  "
+def context(quick: bool) -> dict:
+    """What every run compares with: the stored fine run (t, x, y, z)."""
+    return {"ref": core.read_reference(REFERENCE)[2]}
+
+
+def variant_row(v: core.Variant, quick: bool, ctx: dict, *, budget_s: float, max_repeats: int) -> dict:
+    """One variant's CSV row."""
+    ref, t_end = ctx["ref"], until(quick)
+    timed = core.timed_run(_start(v, t_end), t_end, MARK, _tip, budget_s=budget_s, max_repeats=max_repeats)
+    err, final, _ = core.history_error(timed.samples, ref[:, 0], ref[:, 1:], MARK, t_end, L)
+    return core.row(v, **core.timing_columns(timed, t_end), error=err, error_final=final)
+
+
+def _line(r: dict) -> str:
+    return (f"  {r['code']:10s} {r['family']:44s} Δt {r['dt']:<8.3g} {r['steps_per_s']:8.0f} steps/s  "
             f"wall/sim-s {r['wall_per_sim_s']:8.3g}  error {r['error']:.2e}"
             + ("" if r["completed"] else f"  FAILED at t = {r['t_reached_s']:.3f} s: {r['note']}"))
-    return rows
+
+
+def run(quick: bool, *, budget_s: float, max_repeats: int, log=print, client=None) -> list[dict]:
+    """Every variant of the sweep as a CSV row (on Dask with a ``client``, :func:`core.run_variants`)."""
+    return core.run_variants(NAME, variants(quick), quick, context(quick), budget_s=budget_s,
+                             max_repeats=max_repeats, log=log, line=_line, client=client)
 
 
 def run_peers(quick: bool, *, repeats: int, log=print) -> tuple[list[dict], list[str]]:

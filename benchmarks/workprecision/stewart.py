@@ -126,19 +126,24 @@ def _line(r: dict) -> str:
             + ("" if r["completed"] else f"  FAILED: {r['note']}"))
 
 
-def run(quick: bool, *, budget_s: float, max_repeats: int, log=print) -> list[dict]:
-    """Every variant of the sweep as a CSV row."""
-    _, _, ref = core.read_reference(REFERENCE)
+def context(quick: bool) -> dict:
+    """What every run compares with: the stored reference poses (t, p, q)."""
+    return {"ref": core.read_reference(REFERENCE)[2]}
+
+
+def variant_row(v: core.Variant, quick: bool, ctx: dict, *, budget_s: float, max_repeats: int) -> dict:
+    """One variant's CSV row."""
     t_end = until(quick)
-    rows = []
-    for v in variants(quick):
-        start, observe = _start(v, t_end)
-        timed = core.timed_run(start, t_end, MARK, observe, budget_s=budget_s, max_repeats=max_repeats)
-        ep, ea, ef = pose_errors(timed.samples, ref, t_end)
-        r = core.row(v, **core.timing_columns(timed, t_end), error=ep, error_orientation_rad=ea, error_final=ef)
-        rows.append(r)
-        log(_line(r))
-    return rows
+    start, observe = _start(v, t_end)
+    timed = core.timed_run(start, t_end, MARK, observe, budget_s=budget_s, max_repeats=max_repeats)
+    ep, ea, ef = pose_errors(timed.samples, ctx["ref"], t_end)
+    return core.row(v, **core.timing_columns(timed, t_end), error=ep, error_orientation_rad=ea, error_final=ef)
+
+
+def run(quick: bool, *, budget_s: float, max_repeats: int, log=print, client=None) -> list[dict]:
+    """Every variant of the sweep as a CSV row (on Dask with a ``client``, :func:`core.run_variants`)."""
+    return core.run_variants(NAME, variants(quick), quick, context(quick), budget_s=budget_s,
+                             max_repeats=max_repeats, log=log, line=_line, client=client)
 
 
 # -- peers ------------------------------------------------------------------------------------------
