@@ -152,19 +152,23 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
     scene, model = _load(args.scene, overrides, _limits(args))
+    spec = scene.solver
     sim = Simulator(model)
+    path = None
+    if spec.analysis == "static" and spec.control != "load":
+        from .integrators.path_following import PathFollower
+        path = PathFollower(sim)              # SceneError (exit 1) for loads it cannot scale
     warm = sim.warmup()
-    sim.initialize()
-    until = scene.solver.until
-    progress = _Progress(until, not args.quiet)
+    if path is None:
+        sim.initialize()
+    until = spec.until
+    progress = _Progress(until if path is None else spec.max_steps, not args.quiet)
     tracker = PoseTracker(model)
 
     # Adapters (MCAP recorder, rerun logger) attach here: hooks with start(sim), step(sim, res)
     # and close(sim, summary). The core never imports them.
     hooks = [h(args, scene, model) for h in getattr(args, "hook_factories", ())]
     hooks = [h for h in hooks if h is not None]
-    for h in hooks:
-        h.start(sim)
 
     def on_step(s, res):
         tracker.update(s.state.t, s.state.q)
@@ -174,7 +178,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     error = ""
     try:
-        sim.run(until, callback=on_step)
+        if path is not None:
+            path.initialize()
+        for h in hooks:
+            h.start(sim)
+        if path is None:
+            sim.run(until, callback=on_step)
+        else:
+            path.run(callback=on_step)
     except ConvergenceError as exc:
         error = str(exc)
     except KeyboardInterrupt:
@@ -183,10 +194,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     summary = sim.summary()
-    summary.update({"scene": scene.name, "scene_file": str(args.scene), "dt": scene.solver.dt,
-                    "until": until, "integrator": scene.solver.integrator, "analysis": scene.solver.analysis,
-                    "jit_warmup_s": warm, "completed": not error, "error": error,
-                    "outputs": sim.outputs()})
+    summary.update({"scene": scene.name, "scene_file": str(args.scene), "analysis": spec.analysis})
+    summary.update(_run_keys(spec, sim, path, error))
+    error = summary["error"]
+    summary.update({"jit_warmup_s": warm, "completed": not error, "outputs": sim.outputs()})
     if tracker.active:
         summary["tracking"] = tracker.summary()
     for h in hooks:
@@ -196,21 +207,55 @@ def cmd_run(args: argparse.Namespace) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(text + "\n")
     if not args.quiet:
-        print(f"{scene.name}: {summary['steps']} steps to t = {summary['sim_time_s']:.6g} s in "
-              f"{summary['wall_time_s']:.3f} s (RTF {summary['rtf']:.3g}, {summary['steps_per_s']:.0f} steps/s, "
-              f"JIT warm-up {warm:.2f} s); Newton mean {summary['newton_iterations_mean']:.2f}, "
-              f"max {summary['newton_iterations_max']}; unconverged {summary['unconverged_steps']}")
-        for k, v in summary["outputs"].items():
-            print(f"  {k}: {_brief(v)}")
-        if tracker.active:
-            tr = summary["tracking"]
-            print(f"  tracking of '{tr['output']}' vs the commanded pose: max position error "
-                  f"{tr['max_position_error_m']:.3e} m (t = {tr['t_of_max_position_error_s']:.3f} s), "
-                  f"rms {tr['rms_position_error_m']:.3e} m, max orientation error {tr['max_orientation_error_rad']:.3e} rad")
+        _print_run(scene, summary, warm, tracker)
     if error:
         print(f"flexmb run: {error}", file=sys.stderr)
         return 130 if error.startswith("interrupted") else 2
     return 0
+
+
+def _run_keys(spec, sim, path, error: str) -> dict:
+    """The keys of ``flexmb run --json`` that depend on the analysis: dynamics names its integrator
+    and Δt; statics its control and what it found on the path (limit points, bifurcations,
+    snap-throughs — a snap-through the scene does not allow is the run's error)."""
+    if spec.analysis != "static":
+        return {"dt": spec.dt, "until": spec.until, "integrator": spec.integrator, "error": error}
+    if path is not None:
+        keys = path.report()
+        keys["error"] = error
+        return keys
+    snap = sim._static.snap.events if sim._static is not None and sim._static.snap is not None else []
+    if snap and not spec.allow_snap_through and not error:
+        first = snap[0]
+        error = (f"snap-through at load step {first['step']} (t = {first['t']:.6g}): {first['kind']} "
+                 f"(negative pivots {first['negative_pivots'][0]} → {first['negative_pivots'][1]}, the step "
+                 f"moved {first['jump_ratio']:.3g}× its tangent prediction); load stepping cannot follow "
+                 f"the path past a limit point: use solver.control: arc_length, or allow it with "
+                 f"solver.allow_snap_through: true")
+    return {"control": "load", "dt": spec.dt, "until": spec.until, "snap_through": snap, "error": error}
+
+
+def _print_run(scene, summary: dict, warm: float, tracker) -> None:
+    print(f"{scene.name}: {summary['steps']} steps to t = {summary['sim_time_s']:.6g} s in "
+          f"{summary['wall_time_s']:.3f} s (RTF {summary['rtf']:.3g}, {summary['steps_per_s']:.0f} steps/s, "
+          f"JIT warm-up {warm:.2f} s); Newton mean {summary['newton_iterations_mean']:.2f}, "
+          f"max {summary['newton_iterations_max']}; unconverged {summary['unconverged_steps']}")
+    if "limit_points" in summary:
+        print(f"  load factor {summary['load_factor']:.6g}, {len(summary['limit_points'])} limit point(s), "
+              f"{len(summary['bifurcations'])} bifurcation(s)")
+        for c in summary["limit_points"] + summary["bifurcations"]:
+            print(f"    {c['kind']} at increment {c['step']}: load factor {c['load_factor']:.6g}, "
+                  f"displacement {c['displacement']}")
+    for s in summary.get("snap_through", []):
+        print(f"  snap-through at load step {s['step']} (t = {s['t']:.6g}): {s['kind']}, "
+              f"displacement {s['displacement_before']} → {s['displacement']}")
+    for k, v in summary["outputs"].items():
+        print(f"  {k}: {_brief(v)}")
+    if tracker.active:
+        tr = summary["tracking"]
+        print(f"  tracking of '{tr['output']}' vs the commanded pose: max position error "
+              f"{tr['max_position_error_m']:.3e} m (t = {tr['t_of_max_position_error_s']:.3f} s), "
+              f"rms {tr['rms_position_error_m']:.3e} m, max orientation error {tr['max_orientation_error_rad']:.3e} rad")
 
 
 def _brief(value, limit: int = 6) -> str:

@@ -903,7 +903,7 @@ class _Services:
     def _call(self, name: str, cb, request, response):
         why = cb(request, response)
         response.success = why is None or why.startswith("ok:")
-        response.message = why[4:] if why and why.startswith("ok:") else why or "ok"
+        response.message = why[3:] if why and why.startswith("ok:") else why or "ok"
         if not response.success:
             self.twin.log.warning(f"{self.names[name]}: refused: {response.message}")
         return response

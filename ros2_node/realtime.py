@@ -224,7 +224,8 @@ class Stepper:
         self._ready.wait(5.0)
 
     def _initial_events(self) -> None:
-        """The state in hand (at start or after a reset) queued for publication, with its /clock."""
+        """The state in hand (at start, on hold, after a reset) queued for publication, with its
+        /clock."""
         self._snapshot(self.runner.sim.last, False, "", 0.0, 0.0, True, True, False, False)
         if self.cfg.clock_every:
             self.outbox.append(("clock", self.runner.t))
@@ -234,10 +235,12 @@ class Stepper:
         return self._held
 
     def hold(self) -> None:
-        """No more steps from now on (the one under way ends first); the state is kept."""
+        """No more steps from now on (the one under way ends first); the state is kept and
+        published (the decimation may have skipped it), with its /clock."""
         with self._lock:
             self._held = True
             self._pending = 0
+            self._initial_events()
         self.wake.set()
 
     def release(self) -> None:

@@ -2,6 +2,19 @@
 
 Every quantity that depends on time (load signals, actuator commands) is evaluated at the
 pseudo-time of the increment, so a static run is a sequence of equilibria t_k = k·T/N.
+
+Load stepping cannot pass a limit point: past it the equilibrium it converges to (if any) lies on
+another branch. :class:`SnapThroughMonitor` reports such a step, a **snap-through**, when
+
+- the number of negative pivots of the tangent changed between the step's start and its converged
+  state (a critical point was passed, :mod:`flexmb_core.integrators.critical`), or
+- the step **jumped**: its converged increment of the free nodal positions is more than
+  :data:`JUMP_RATIO` times the first Newton increment, the tangent's linear prediction of the same
+  load increment. On a smooth path the two agree to first order in the step (the converged one is
+  longer where the structure softens, by ~1.5× at most for steps that converge), while a jump to a
+  distant branch is many times longer than the prediction.
+
+Path following through limit points and snap-backs: :mod:`flexmb_core.integrators.path_following`.
 """
 
 from __future__ import annotations
@@ -18,13 +31,66 @@ from ..solvers.guard import StepGuard
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
+from .critical import PivotCounter
 from .energy import energies
+from .path_following import dof_index, position_mask
+
+# A converged load step longer than this many times its tangent prediction is a jump between
+# branches (see the module docstring).
+JUMP_RATIO = 4.0
+
+
+class SnapThroughMonitor:
+    """Watches a load-stepping run for snap-throughs (see the module docstring).
+
+    Attributes
+    ----------
+    events : list[dict] — one per snap-through: ``step``, ``t`` (pseudo-time), ``displacement``
+        and ``displacement_before`` (the ``solver.monitor`` component, m; None without one),
+        ``kind`` (``critical_point`` | ``jump`` | ``critical_point+jump``), ``negative_pivots``
+        [before, after] and ``jump_ratio``.
+    """
+
+    def __init__(self, model: Model, spec: SolverSpec):
+        self.model = model
+        self.pivots = PivotCounter(model)
+        self.w = position_mask(model)[:model.nfree]
+        self.monitor = dof_index(model, spec.monitor) if spec.monitor is not None else -1
+        self.events: list[dict] = []
+        self.steps = 0
+        self._count: int | None = None
+        self._u_prev = 0.0
+
+    def _u(self, q: np.ndarray) -> float | None:
+        return float(q[self.monitor] - self.model.q0[self.monitor]) if self.monitor >= 0 else None
+
+    def observe(self, q_start: np.ndarray, q: np.ndarray, t: float, kdata: np.ndarray,
+                predicted: float) -> None:
+        """A converged step from ``q_start`` to ``q`` (ndof,) whose tangent at ``q`` is ``kdata``;
+        ``predicted`` = ‖first Newton increment‖ of the free positions (m), 0 for the first solve."""
+        count = self.pivots.count(kdata)
+        free = self.model.free
+        moved = float(np.linalg.norm((q[free] - q_start[free])[self.w]))
+        ratio = moved / predicted if predicted > 0.0 else 0.0
+        kinds = []
+        if self.steps > 0 and count is not None and self._count is not None and count != self._count:
+            kinds.append("critical_point")
+        if self.steps > 0 and ratio > JUMP_RATIO:
+            kinds.append("jump")
+        u = self._u(q)
+        if kinds:
+            self.events.append({"step": self.steps, "t": t, "displacement_before": self._u(q_start),
+                                "displacement": u, "kind": "+".join(kinds),
+                                "negative_pivots": [self._count, count], "jump_ratio": ratio})
+        if count is not None:
+            self._count = count
+        self.steps += 1
 
 
 class StaticSolver:
     """Newton on ``f_int(q; λ(t)) = f_ext(t)`` for the free DOFs."""
 
-    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec):
+    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec, *, monitor: bool | None = None):
         self.model = model
         self.ws = ws
         self.spec = spec
@@ -34,6 +100,11 @@ class StaticSolver:
         self.guard = StepGuard(model, tolerance=spec.tolerance)
         self._q_p = np.zeros(model.ndof)            # Newton start of the increment under way
         self._c_p = np.zeros(model.n_multipliers)
+        self._w = position_mask(model)[:model.nfree]
+        self._predicted = -1.0                     # ‖first Newton increment‖ of the step (m); −1: not yet
+        # snap-through watch: on for static runs (one more tangent and factorization per step)
+        watch = spec.analysis == "static" if monitor is None else monitor
+        self.snap = SnapThroughMonitor(model, spec) if watch else None
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         """Equilibrium at pseudo-time ``t`` starting from ``state.q``. On failure, the policy
@@ -42,14 +113,18 @@ class StaticSolver:
         if self._backup is None:
             self._backup = state.copy()
         self._backup.assign(state)
+        self._predicted = -1.0
         res = self._newton(state, t, lam)
-        if res.converged or self.spec.on_unconverged != "substep":
-            if not res.converged and self.spec.on_unconverged == "stop":
-                state.assign(self._backup)
-            return res
-        t0 = self._backup.t
-        return retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, t0 + (t - t0) * k / n, lam_k),
-                               state, self._backup, lam, self.spec.max_substep_levels, "load increments")
+        if not res.converged and self.spec.on_unconverged == "substep":
+            t0 = self._backup.t
+            res = retry_in_pieces(res, lambda k, n, lam_k: self._newton(state, t0 + (t - t0) * k / n, lam_k),
+                                  state, self._backup, lam, self.spec.max_substep_levels, "load increments")
+        elif not res.converged and self.spec.on_unconverged == "stop":
+            state.assign(self._backup)
+        if res.converged and self.snap is not None:
+            assemble(self.model, self.ws, state.q, state.lam, True, state.mult)
+            self.snap.observe(self._backup.q, state.q, t, self.ws.kdata, max(self._predicted, 0.0))
+        return res
 
     def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec
@@ -64,36 +139,40 @@ class StaticSolver:
         inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
         nf = m.nfree
         rf = np.zeros(m.nsys)
-        for it in range(1, spec.max_iterations + 1):
-            strain = assemble(m, ws, q, lam, True, state.mult)
-            if it == 1:
-                u_p = strain
-                if m.n_multipliers:
-                    self._c_p[:] = ws.rc
-            rf[:nf] = (ws.r - ws.f_ext)[free]
-            rf[nf:] = ws.rc
-            if not np.all(np.isfinite(rf)):
-                message = f"non-finite residual at iteration {it}"
-                break
-            try:
-                self.lu.factor(ws.kdata)
-            except RuntimeError as exc:
-                message = (f"singular tangent at iteration {it} ({exc}); "
-                           "a mechanism with a free motion needs a support")
-                break
-            dq = self.lu.solve(-rf)
-            if not np.all(np.isfinite(dq)):
-                message = f"non-finite increment at iteration {it}"
-                break
-            q[free] += dq[:nf]
-            state.mult += dq[nf:]
-            inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
-            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-            rel = float(np.linalg.norm(rf[:nf]) / ref)
-            viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
-            if inc <= spec.tolerance and viol <= spec.tolerance:
-                converged = True
-                break
+        # a diverging iterate overflows: the checks below report it, numpy need not warn
+        with np.errstate(all="ignore"):
+            for it in range(1, spec.max_iterations + 1):
+                strain = assemble(m, ws, q, lam, True, state.mult)
+                if it == 1:
+                    u_p = strain
+                    if m.n_multipliers:
+                        self._c_p[:] = ws.rc
+                rf[:nf] = (ws.r - ws.f_ext)[free]
+                rf[nf:] = ws.rc
+                if not np.all(np.isfinite(rf)):
+                    message = f"non-finite residual at iteration {it}"
+                    break
+                try:
+                    self.lu.factor(ws.kdata)
+                except RuntimeError as exc:
+                    message = (f"singular tangent at iteration {it} ({exc}); "
+                               "a mechanism with a free motion needs a support")
+                    break
+                dq = self.lu.solve(-rf)
+                if not np.all(np.isfinite(dq)):
+                    message = f"non-finite increment at iteration {it}"
+                    break
+                if it == 1 and self._predicted < 0.0:    # the tangent's prediction of the whole step
+                    self._predicted = float(np.linalg.norm(dq[:nf][self._w]))
+                q[free] += dq[:nf]
+                state.mult += dq[nf:]
+                inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
+                ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+                rel = float(np.linalg.norm(rf[:nf]) / ref)
+                viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
+                if inc <= spec.tolerance and viol <= spec.tolerance:
+                    converged = True
+                    break
         if not converged:
             if not message:
                 message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e})"

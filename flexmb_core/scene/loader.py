@@ -14,6 +14,7 @@ from .limits import DEFAULT_LIMITS, Limits, over_limit
 from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, ServoSpec, Signal, SolverSpec, Support)
+from .schema import ArcLengthSpec, DisplacementControlSpec, DofComponent, PathStepSpec
 from .shells import edge_ref, parse_edge_loads, parse_shell, parse_shell_joint
 
 OUTPUT_KINDS = {
@@ -99,7 +100,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
                         "materials: {name: {eta: <Pa·s>}}; the damping block holds mass_proportional only")
     damp = damp.mapping({"mass_proportional"})
     c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
-    solver = _solver(root.get("solver", {}), overrides or {})
+    solver = _solver(root.get("solver", {}), overrides or {}, nodes)
     outputs = tuple(_output(k, n, nodes, members, shells) for k, n in root.get("outputs", {}).items())
     commands = _commands(root.get("commands"), members) if root.has("commands") else None
     joint_nodes = root.get("joints", []).list()
@@ -383,7 +384,7 @@ def _loads(n: Node, nodes, members):
     return tuple(forces), tuple(moments), gravity
 
 
-def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
+def _solver(n: Node, overrides: dict[str, Any], nodes: dict | None = None) -> SolverSpec:
     fields = {f.name for f in dataclasses.fields(SolverSpec)}
     n.mapping(fields)
     merged = dict(n.value)
@@ -408,7 +409,99 @@ def _solver(n: Node, overrides: dict[str, Any]) -> SolverSpec:
         modified_contraction=n.get("modified_contraction", d.modified_contraction).number(positive=True, hi=0.9),
         tangent_max_age=n.get("tangent_max_age", d.tangent_max_age).integer(lo=1, hi=10**9),
     )
-    return s
+    return _static_control(n, s, nodes or {})
+
+
+_COMPONENTS = ("x", "y", "z")
+_PATH_KEYS = ("arc_length", "displacement", "until_load_factor", "until_displacement", "max_steps")
+
+
+def _static_control(n: Node, s: SolverSpec, nodes: dict) -> SolverSpec:
+    """The statics keys of ``solver`` (control, its block, monitor, goals), checked together:
+    a key that does not apply to the chosen analysis or control is an error, not ignored."""
+    control = n.get("control", "load").string(("load", "arc_length", "displacement"))
+    static_keys = ("control", "monitor", "allow_snap_through") + _PATH_KEYS
+    if s.analysis != "static":
+        given = [k for k in static_keys if n.has(k)]
+        if given:
+            raise n.fail(f"key(s) {name_list(given)} apply to analysis: static only (analysis is '{s.analysis}')",
+                         given[0])
+        return s
+    if control == "load":
+        given = [k for k in _PATH_KEYS if n.has(k)]
+        if given:
+            raise n.fail(f"key(s) {name_list(given)} apply to control: arc_length or displacement; "
+                         f"load control steps by 'dt' to 'until'", given[0])
+    other = "displacement" if control == "arc_length" else "arc_length"
+    if n.has(other):
+        raise n.fail(f"'{other}' applies to control: {other} (control is '{control}')", other)
+    arc = disp = None
+    if control == "arc_length":
+        if not n.has("arc_length"):
+            raise n.fail("control: arc_length needs an 'arc_length' block, e.g. {initial: 0.05} (m)")
+        arc = _arc_length(n.get("arc_length"))
+    elif control == "displacement":
+        if not n.has("displacement"):
+            raise n.fail("control: displacement needs a 'displacement' block {node, component, to}")
+        disp = _displacement_control(n.get("displacement"), nodes)
+    monitor = _dof_component(n.get("monitor"), nodes) if n.has("monitor") else (disp.dof if disp else None)
+    until_lf = n.get("until_load_factor").number() if n.has("until_load_factor") else None
+    until_u = n.get("until_displacement").number(unit="m") if n.has("until_displacement") else None
+    if until_u is not None and until_u == 0.0:
+        raise n.fail("expected a non-zero displacement (m) to stop at, got 0", "until_displacement")
+    if until_u is not None and monitor is None:
+        raise n.fail("'until_displacement' needs a 'monitor' {node, component} (the displacement it bounds)",
+                     "until_displacement")
+    if control == "arc_length":
+        if until_lf is None and until_u is None:
+            raise n.fail("control: arc_length needs a goal: 'until_load_factor' and/or 'until_displacement'")
+        if monitor is None:
+            raise n.fail("control: arc_length needs a 'monitor' {node, component}: the displacement "
+                         "reported with the load factor")
+    return dataclasses.replace(
+        s, control=control, arc_length=arc, displacement=disp, monitor=monitor,
+        until_load_factor=until_lf, until_displacement=until_u,
+        max_steps=n.get("max_steps", s.max_steps).integer(lo=1, hi=10**6),
+        allow_snap_through=n.get("allow_snap_through", s.allow_snap_through).boolean())
+
+
+def _dof_component(n: Node, nodes: dict) -> DofComponent:
+    """``{node, component: x|y|z}``."""
+    keys = {f.name for f in dataclasses.fields(DofComponent)}
+    n.mapping(keys, keys)
+    return DofComponent(n.get("node").name_in(nodes, "node"), n.get("component").string(_COMPONENTS))
+
+
+def _path_step(n: Node, what: str) -> PathStepSpec:
+    """The increment keys shared by ``arc_length`` and ``displacement`` (m; ``what`` names them)."""
+    initial = n.get("initial").number(positive=True, unit="m")
+    lo = n.get("min", initial * 1e-3).number(positive=True, unit="m")
+    hi = n.get("max", initial * 10.0).number(positive=True, unit="m")
+    if not lo <= initial <= hi:
+        raise n.fail(f"expected min ≤ initial ≤ max for the {what}, got min {excerpt(lo)}, initial "
+                     f"{excerpt(initial)}, max {excerpt(hi)} (m)")
+    return PathStepSpec(initial, lo, hi, n.get("target_iterations", 5).integer(lo=1, hi=100))
+
+
+def _arc_length(n: Node) -> ArcLengthSpec:
+    step_keys = {f.name for f in dataclasses.fields(PathStepSpec)}
+    n.mapping(step_keys | {f.name for f in dataclasses.fields(ArcLengthSpec)} - {"step"}, {"initial"})
+    kind = n.get("kind", "cylindrical").string(("cylindrical", "spherical"))
+    if kind == "cylindrical" and n.has("psi"):
+        raise n.fail("'psi' (the load term's weight) applies to kind: spherical only", "psi")
+    return ArcLengthSpec(_path_step(n, "arc length"), kind, n.get("psi", 1.0).number(positive=True))
+
+
+def _displacement_control(n: Node, nodes: dict) -> DisplacementControlSpec:
+    step_keys = {f.name for f in dataclasses.fields(PathStepSpec)}
+    dof_keys = {f.name for f in dataclasses.fields(DofComponent)}
+    n.mapping(step_keys | dof_keys | {"to"}, {"node", "component", "to", "initial"})
+    dof = DofComponent(n.get("node").name_in(nodes, "node"), n.get("component").string(_COMPONENTS))
+    to = n.get("to").number(unit="m")
+    if to == 0.0:
+        raise n.fail("expected a non-zero target displacement (m), got 0", "to")
+    return DisplacementControlSpec(dof, to, _path_step(n, "displacement increment"))
+
 
 
 def _output(name: str, n: Node, nodes, members, shells) -> Output:

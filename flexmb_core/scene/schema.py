@@ -235,7 +235,66 @@ class Gravity:
 
 
 @dataclass(frozen=True)
+class DofComponent:
+    """One displacement component of a named node: ``component`` x | y | z (global axes)."""
+
+    node: str
+    component: str
+
+
+@dataclass(frozen=True)
+class PathStepSpec:
+    """Increment control of a path-following static run (:mod:`flexmb_core.integrators.path_following`).
+
+    The first increment is ``initial``; each next one is scaled by √(target_iterations / iterations
+    of the last), bounded to [½, 2]× and to [``min``, ``max``]; a failed increment is halved, down
+    to ``min``. Arc lengths and displacement increments are in m.
+    """
+
+    initial: float
+    min: float
+    max: float
+    target_iterations: int = 5
+
+
+@dataclass(frozen=True)
+class ArcLengthSpec:
+    """``solver.arc_length`` (Crisfield): ``kind`` cylindrical (‖Δu‖ = Δl over the free nodal
+    positions) or spherical (‖Δu‖² + ψ² Δλ² ‖u₁‖² = Δl², u₁ the first linear displacement per unit
+    load factor, so ψ is dimensionless)."""
+
+    step: PathStepSpec
+    kind: str = "cylindrical"        # cylindrical | spherical
+    psi: float = 1.0
+
+
+@dataclass(frozen=True)
+class DisplacementControlSpec:
+    """``solver.displacement``: the load factor follows from prescribing one displacement
+    component ``dof`` (m, from the reference position), stepped from 0 to ``to``."""
+
+    dof: DofComponent
+    to: float
+    step: PathStepSpec
+
+
+@dataclass(frozen=True)
 class SolverSpec:
+    """``solver:``. Statics (``analysis: static``) follows the equilibrium path under ``control``:
+
+    - ``load``: the loads follow their signals in pseudo-time ``t`` = 0 … ``until`` by ``dt``
+      (load stepping); a step that passes a critical point or jumps to another branch is a
+      snap-through, an error unless ``allow_snap_through``;
+    - ``arc_length`` / ``displacement``: every load (forces, gravity, edge loads, moments) is its
+      constant value times the load factor λ, an unknown traced by Crisfield's arc length
+      (``arc_length``) or by prescribing one displacement component (``displacement``), for at
+      most ``max_steps`` increments until λ reaches ``until_load_factor`` or the ``monitor``
+      displacement reaches ``until_displacement``.
+
+    ``monitor`` names the displacement component reported with limit points, bifurcations and
+    snap-throughs (by default the controlled one under displacement control).
+    """
+
     analysis: str = "dynamic"        # dynamic | static
     integrator: str = "generalized_alpha"   # Arnold–Brüls (default) | newmark | chung_hulbert
     dt: float = 1e-3                 # time step (s); in statics the load (pseudo-time) increment
@@ -252,6 +311,14 @@ class SolverSpec:
     newton: str = "full"                       # full | modified (tangent reuse)
     modified_contraction: float = 0.25         # refresh when |Δq_k| > this · |Δq_k−1|
     tangent_max_age: int = 100                 # steps a held tangent may serve
+    control: str = "load"                      # statics: load | arc_length | displacement
+    arc_length: ArcLengthSpec | None = None    # control: arc_length
+    displacement: DisplacementControlSpec | None = None   # control: displacement
+    monitor: DofComponent | None = None        # reported displacement component
+    until_load_factor: float | None = None     # path following: stop once λ reaches this
+    until_displacement: float | None = None    # path following: stop once the monitor reaches this (m)
+    max_steps: int = 200                       # path following: increments at most
+    allow_snap_through: bool = False           # load control: a snap-through is reported, not an error
 
 
 @dataclass(frozen=True)

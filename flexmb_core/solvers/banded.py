@@ -812,6 +812,12 @@ class SkylineLU:
             return float("nan")
         return float(self._stats[1] / self._stats[0])
 
+    @property
+    def negative_pivots(self) -> int:
+        """Pivots < 0 of the last successful factorization (for a symmetric matrix, its number of
+        negative eigenvalues: Sylvester's law of inertia); ``-1`` before one."""
+        return int(np.count_nonzero(self._inv_diag < 0.0)) if self._factored else -1
+
     # -- numerics -------------------------------------------------------------------------------
 
     def _writable(self, a: np.ndarray) -> np.ndarray:

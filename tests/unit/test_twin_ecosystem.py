@@ -152,8 +152,10 @@ def test_stepper_hold_step_n_and_reset_without_the_thread(stewart):
     done, message = st.step_n(25)
     assert done == 25 and message == "" and runner.t == pytest.approx(25 * runner.dt, abs=1e-15)
     kinds = [ev[0] for ev in st.outbox]
-    # the command, /clock every 5 steps, states every 10 and the last step's (acknowledged) state
-    assert kinds.count("cmd") == 1 and kinds.count("clock") == 5
+    # the held state with its /clock, the command, then /clock every 5 steps; states: the first
+    # that uses the command (publish_on_command), every 10th and the last (acknowledged)
+    assert kinds[:3] == ["out", "clock", "cmd"] and st.slots[st.outbox[0][1]].state.t == 0.0
+    assert kinds.count("cmd") == 1 and kinds.count("clock") == 1 + 5 and kinds.count("out") == 1 + 4
     last = st.slots[st.outbox[-2][1]] if st.outbox[-1][0] == "clock" else st.slots[st.outbox[-1][1]]
     assert last.ack and last.due and last.state.t == runner.t
     st.reset()
