@@ -1,6 +1,6 @@
 # flexmb — developer entry points.
 #
-#   make setup   create .venv/, install flexmb (editable, all extras) and build flexmb_msgs into it
+#   make setup   create .venv/, install flexmb (editable, all extras) and build flexmb_msgs and tf2_msgs into it
 #   make demo    run the demo (DEMO_CMD, overridable: make demo DEMO_CMD=...)
 #   make test    run the test suite on a random ROS_DOMAIN_ID, DDS discovery on localhost only
 #   make bench   run the benchmarks
@@ -8,20 +8,24 @@
 #
 # `setup` is idempotent: stamp files under .venv/ record what was installed, so a second run
 # with nothing changed does nothing. Edit pyproject.toml -> dependencies are reinstalled;
-# edit msgs/ -> flexmb_msgs is rebuilt.
+# edit msgs/ -> flexmb_msgs is rebuilt; edit ros/tf2_msgs/ -> tf2_msgs is rebuilt.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
 .DELETE_ON_ERROR:
 .DEFAULT_GOAL := help
 MAKEFLAGS += --no-builtin-rules
+comma := ,
 
 PYTHON ?= python3.11
 VENV := $(CURDIR)/.venv
 PY := $(VENV)/bin/python
 EXTRAS := dev,ros,ros-build,record,viz,bench,cluster
-MSGS_BUILD := $(CURDIR)/build/msgs
-MSGS_SRC := msgs/CMakeLists.txt msgs/package.xml $(sort $(wildcard msgs/msg/*.msg msgs/srv/*.srv))
+# rosidl interface packages built into the venv: flexmb_msgs (msgs/) and tf2_msgs (ros/tf2_msgs/, TFMessage
+# only: not on PyPI, needed for a live /tf)
+interface_src = $(1)/CMakeLists.txt $(1)/package.xml $(sort $(wildcard $(1)/msg/*.msg $(1)/srv/*.srv))
+MSGS_SRC := $(call interface_src,msgs)
+TF2_MSGS_SRC := $(call interface_src,ros/tf2_msgs)
 
 # The Stewart twin end to end: the node and the command player as two processes on DDS (real
 # time, Δt = 1 ms, the 20 s appendix trajectory), recorded to MCAP, then shown in rerun (an .rrd).
@@ -42,7 +46,7 @@ export PYTHONUNBUFFERED := 1
 help:
 	@sed -n '3,8p' $(firstword $(MAKEFILE_LIST)) | sed 's/^# \{0,1\}//'
 
-setup: $(VENV)/.stamp-msgs
+setup: $(VENV)/.stamp-msgs $(VENV)/.stamp-tf2-msgs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -53,20 +57,29 @@ $(VENV)/.stamp-deps: pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[$(EXTRAS)]'
 	touch $@
 
-# flexmb_msgs (rosidl interface package) generated, built and installed into the venv prefix.
-# Rebuilt from an empty build directory whenever msgs/ or the dependencies change.
-$(VENV)/.stamp-msgs: $(MSGS_SRC) $(VENV)/.stamp-deps
-	rm -rf $(MSGS_BUILD)
-	mkdir -p $(MSGS_BUILD)
-	AMENT_PREFIX_PATH=$(VENV) cmake -S msgs -B $(MSGS_BUILD) -Wno-dev \
+# $(call build_interfaces,SOURCE_DIR,BUILD_DIR,IMPORT_CHECK): a rosidl interface package generated, built and
+# installed into the venv prefix from an empty build directory (the recipe of a stamp rule below).
+define build_interfaces
+	rm -rf $(2)
+	mkdir -p $(2)
+	AMENT_PREFIX_PATH=$(VENV) cmake -S $(1) -B $(2) -Wno-dev \
 	  -DCMAKE_PREFIX_PATH=$(VENV) -DCMAKE_INSTALL_PREFIX=$(VENV) \
-	  -DPython3_EXECUTABLE=$(PY) -DCMAKE_BUILD_TYPE=Release >$(MSGS_BUILD)/flexmb-configure.log 2>&1 \
-	  || { cat $(MSGS_BUILD)/flexmb-configure.log; exit 1; }
-	cmake --build $(MSGS_BUILD) -j2 >$(MSGS_BUILD)/flexmb-build.log 2>&1 || { cat $(MSGS_BUILD)/flexmb-build.log; exit 1; }
-	cmake --install $(MSGS_BUILD) >$(MSGS_BUILD)/flexmb-install.log 2>&1 || { cat $(MSGS_BUILD)/flexmb-install.log; exit 1; }
-	cd / && $(PY) -c 'from flexmb_msgs.msg import ActuatorCommand, ActuatorState, TwinStatus'
-	@echo "flexmb_msgs installed into $(VENV)"
+	  -DPython3_EXECUTABLE=$(PY) -DCMAKE_BUILD_TYPE=Release >$(2)/flexmb-configure.log 2>&1 \
+	  || { cat $(2)/flexmb-configure.log; exit 1; }
+	cmake --build $(2) -j2 >$(2)/flexmb-build.log 2>&1 || { cat $(2)/flexmb-build.log; exit 1; }
+	cmake --install $(2) >$(2)/flexmb-install.log 2>&1 || { cat $(2)/flexmb-install.log; exit 1; }
+	cd / && $(PY) -c '$(3)'
+	@echo "$(1) installed into $(VENV)"
 	touch $@
+endef
+
+# flexmb_msgs, rebuilt whenever msgs/ or the dependencies change.
+$(VENV)/.stamp-msgs: $(MSGS_SRC) $(VENV)/.stamp-deps
+	$(call build_interfaces,msgs,$(CURDIR)/build/msgs,from flexmb_msgs.msg import ActuatorCommand$(comma) ActuatorState$(comma) TwinStatus)
+
+# tf2_msgs (TFMessage), rebuilt whenever ros/tf2_msgs/ or the dependencies change.
+$(VENV)/.stamp-tf2-msgs: $(TF2_MSGS_SRC) $(VENV)/.stamp-deps
+	$(call build_interfaces,ros/tf2_msgs,$(CURDIR)/build/tf2_msgs,from tf2_msgs.msg import TFMessage)
 
 test: setup
 	domain=$$(( RANDOM % 200 + 1 )); echo "ROS_DOMAIN_ID=$$domain"; \
