@@ -183,8 +183,11 @@ class BagReader:
                     m = Metadata.read(body)
                     self.metadata[m.name] = dict(m.metadata)
                 elif opcode == Opcode.FOOTER:
-                    Footer.read(body)
                     footer = True
+                    if Footer.read(body).summary_start == 0:
+                        # the writer's provisional end (ros2_node.bag.writer): readable, but the
+                        # recorder never closed the file
+                        self._stop(pos, n, "a provisional footer without summary (the recorder was not closed)")
             except Exception as exc:            # a torn record whose length field survived
                 self._stop(pos, n, f"damaged record at byte {pos} (opcode 0x{opcode:02x}): {exc}")
                 break

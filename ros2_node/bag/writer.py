@@ -6,14 +6,23 @@
 Crash safety: a chunk is closed and the file flushed to the operating system every
 ``chunk_seconds`` of message time, every ``chunk_messages`` messages, or when the chunk exceeds
 ``chunk_bytes`` — whichever comes first — and ``metadata.yaml`` is then rewritten (at most once a
-second of wall time) to describe what is on disk. A killed process therefore loses at most the open chunk; the data before it is
+second of wall time, at once when a topic was added) to describe what is on disk. A killed process therefore loses at most the open chunk; the data before it is
 complete records that :class:`~ros2_node.bag.reader.BagReader` reads and ``flexmb bag recover``
 turns back into a complete bag. (Flushing reaches the kernel, which survives the process; it is
 not an ``fsync``, which only a power loss would need.)
+
+Readable by the standard readers after a kill: every flush ends the file with a provisional
+``DataEnd`` + ``Footer`` (no summary) + magic, written in the same ``pwrite`` as the chunk it
+follows; the next flush writes its chunk over that tail. A file cut by SIGKILL is therefore a valid
+MCAP up to the last flushed chunk, which ``mcap``, ``mcap-ros2-support`` and ``rosbags`` read by
+scanning (there is no summary to seek with). Only a kill inside that one system call (a few µs per
+``chunk_seconds``) can leave a torn tail, which ``flexmb bag recover`` repairs. ``close`` writes
+the full summary and footer over the tail.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -45,6 +54,57 @@ def _compression(name: str):
     if name not in table:
         raise BagError(f"compression must be one of 'zstd', 'lz4', 'none', got {name!r}")
     return table[name]
+
+
+def _provisional_tail() -> bytes:
+    """``DataEnd`` + ``Footer`` without a summary + the closing magic: the smallest end that
+    makes the bytes before it a complete MCAP file."""
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import MCAP0_MAGIC
+    from mcap.data_stream import RecordBuilder
+
+    b = RecordBuilder()
+    DataEnd(0).write(b)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(b)
+    return bytes(b.end()) + MCAP0_MAGIC
+
+
+class _CommitStream:
+    """The stream the ``mcap`` writer writes to: bytes wait in memory until :meth:`commit` writes
+    them, followed by a tail, in one ``pwrite`` at the end of the committed data; the next commit
+    overwrites that tail. ``tell`` counts committed and pending bytes (the writer's offsets)."""
+
+    def __init__(self, path: Path):
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._committed = 0
+        self._pending = bytearray()
+
+    def write(self, data) -> int:
+        self._pending += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self._committed + len(self._pending)
+
+    def flush(self) -> None:        # the mcap writer's flush: committing is the owner's decision
+        pass
+
+    def commit(self, tail: bytes = b"") -> None:
+        """Write the pending bytes and ``tail`` at the end of the committed data (one system call
+        unless the kernel writes less)."""
+        buf = memoryview(bytes(self._pending) + tail)
+        off = self._committed
+        while buf:
+            n = os.pwrite(self._fd, buf, off)
+            buf, off = buf[n:], off + n
+        self._committed += len(self._pending)
+        self._pending.clear()
+
+    def close(self) -> None:
+        """Commit, cut anything beyond the data (a provisional tail) and close."""
+        self.commit()
+        os.ftruncate(self._fd, self._committed)
+        os.close(self._fd)
 
 
 class BagWriter:
@@ -94,11 +154,13 @@ class BagWriter:
         self.path = self.dir / self.file_name
         self._chunk_ns = int(round(chunk_seconds * 1e9))
         self._chunk_messages = int(chunk_messages)
-        self._stream = open(self.path, "wb")
+        self._stream = _CommitStream(self.path)
+        self._tail = _provisional_tail()
         # message indexes are kept (rosbags finds messages through them) although writing them is
         # most of a chunk flush's cost
         self._mcap = Writer(self._stream, chunk_size=int(chunk_bytes), compression=_compression(compression))
         self._mcap.start(profile="ros2", library="flexmb/ros2_node.bag")
+        self._stream.commit(self._tail)
         self.info = BagInfo(self.file_name, qos=qos or OfferedQos(), custom_data=dict(custom_data or {}))
         self._channels: dict[str, Channel] = {}                # topic → channel
         self._schemas: dict[str, int] = {}                     # type → schema id
@@ -109,6 +171,7 @@ class BagWriter:
         self.closed = False
         self._metadata_interval = float(metadata_interval)
         self._metadata_wall = time.monotonic()
+        self._metadata_topics = 0
         rosbag2.write(self.dir, self.info)                     # provisional: no messages yet
 
     # -- records outside chunks (written and flushed at once) --------------------------------------
@@ -116,11 +179,11 @@ class BagWriter:
                        log_time_ns: int = 0) -> None:
         self._mcap.add_attachment(create_time=0, log_time=int(log_time_ns), name=name, media_type=media_type,
                                   data=bytes(data))
-        self._stream.flush()
+        self._stream.commit(self._tail)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         self._mcap.add_metadata(name, {str(k): str(v) for k, v in data.items()})
-        self._stream.flush()
+        self._stream.commit(self._tail)
 
     # -- messages -------------------------------------------------------------------------------
     def channel(self, topic: str, type_name: str, schema: str | None = None) -> Channel:
@@ -180,14 +243,18 @@ class BagWriter:
         last rewrite is older than ``metadata_interval`` (wall clock)."""
         if self.closed:
             return
-        self._mcap.flush()             # finalizes the chunk (if it holds messages) and flushes
+        self._mcap.flush()             # finalizes the chunk (if it holds messages)
+        self._stream.commit(self._tail)
         self._chunk_start = None
         self._chunk_count = 0
         self.chunks_flushed += 1
         now = time.monotonic()
-        if now - self._metadata_wall >= self._metadata_interval:
+        # a new topic is written at once: rosbags reads a killed bag's messages by the topics listed
+        # in metadata.yaml (stale counts do not matter to it)
+        if now - self._metadata_wall >= self._metadata_interval or len(self.info.topics) != self._metadata_topics:
             rosbag2.write(self.dir, self.info)
             self._metadata_wall = now
+            self._metadata_topics = len(self.info.topics)
 
     def close(self) -> None:
         """Write the MCAP summary and footer and the final ``metadata.yaml``. Idempotent."""
