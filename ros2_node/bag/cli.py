@@ -28,6 +28,14 @@ peak |value| over the bag):
 
 Exit codes: 0 every field within tolerance; 3 a deviation beyond tolerance, a structural mismatch,
 a failed replay step or recorded outputs never reached; 1 bad input.
+
+flexmb replay DIR (a directory of bags, e.g. bags/): every bag under DIR, each a task on Dask
+distributed (--scheduler ADDRESS, or a local cluster of --workers processes, default one per core;
+one bag or --workers 1: in this process), the same --scene/--override/--tolerance for each; a bag
+listed in DIR/manifest.yaml starts from its entry's tolerances. One table (bag, ok, worst field,
+exit code); --json OUT has one entry per bag. Exit 0 every bag within tolerance, 3 any regression
+(or a listed bag missing), 1 bad input (no bag under DIR, a bad manifest or flag, or only bags
+that cannot be replayed).
 """
 
 BAG_HELP = """Inspect and repair recordings.
@@ -45,9 +53,31 @@ def _flatten(items) -> list[str]:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from .replay import replay
+    from .replay_many import is_bag_dir
+
+    if Path(args.bag).is_dir() and not is_bag_dir(Path(args.bag)):
+        return _replay_dir(args)
 
     report = replay(args.bag, tolerances=_flatten(args.tolerance), scene_path=args.scene,
                     overrides=_flatten(args.override))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
+    if not args.quiet or not report.ok:
+        print(report.format())
+    return report.exit_code
+
+
+def _replay_dir(args: argparse.Namespace) -> int:
+    from .replay_many import replay_dir
+
+    def finished(result) -> None:       # a failing bag's full report, as `flexmb replay BAG` prints it
+        if not result.ok and result.report is not None:
+            print(result.report.format(), flush=True)
+
+    report = replay_dir(args.bag, tolerances=_flatten(args.tolerance), scene_path=args.scene,
+                        overrides=_flatten(args.override), scheduler=args.scheduler, workers=args.workers,
+                        on_result=finished)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
@@ -94,7 +124,8 @@ def register(verbs, run_parser: argparse.ArgumentParser) -> None:
     """Add ``replay`` and ``bag`` to the verbs and ``--mcap OUT`` / ``--record-rate HZ`` to ``run``."""
     r = verbs.add_parser("replay", help="replay a recording's commands and compare its outputs (regression)",
                          description=REPLAY_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    r.add_argument("bag", metavar="BAG", help="rosbag2 directory (or .mcap) from flexmb run/node --mcap")
+    r.add_argument("bag", metavar="BAG", help="rosbag2 directory (or .mcap) from flexmb run/node --mcap, or a "
+                                              "directory of bags (DIR: every bag under it)")
     r.add_argument("--json", metavar="OUT", help="write the report (every field's worst deviation) as JSON")
     r.add_argument("--tolerance", metavar="KEY=VALUE", nargs="+", action="append",
                    help="override a tolerance (keys above)")
@@ -102,6 +133,11 @@ def register(verbs, run_parser: argparse.ArgumentParser) -> None:
     r.add_argument("--override", metavar="KEY=VALUE", nargs="+", action="append",
                    help="edit the scene before replaying, e.g. materials.steel.E=2.2e11 or solver.tolerance=1e-6")
     r.add_argument("--quiet", action="store_true", help="print the report only when the replay fails")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="DIR: replay the bags as tasks of this Dask scheduler (tcp://host:8786)")
+    r.add_argument("--workers", type=int, metavar="N",
+                   help="DIR: worker processes of the local Dask cluster (default: one per core, at most one per "
+                        "bag; 1: one bag after another in this process)")
     r.set_defaults(func=cmd_replay)
 
     b = verbs.add_parser("bag", help="inspect, recover or regenerate recordings", description=BAG_HELP,
