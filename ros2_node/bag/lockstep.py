@@ -35,7 +35,7 @@ class LockstepResult:
 def input_kinds(node_name: str) -> dict[str, str]:
     """Resolved command topic → the ``topic_kind`` of :func:`ros2_node.twin.apply_message`."""
     return {T.COMMANDS.resolved(node_name): "commands", T.ACTUATOR_COMMANDS.resolved(node_name): "actuator_commands",
-            T.TRAJECTORY.resolved(node_name): "joint_trajectory"}
+            T.TRAJECTORY.resolved(node_name): "joint_trajectory", T.JOINT_COMMANDS.resolved(node_name): "joint_commands"}
 
 
 def ns(t: float) -> int:

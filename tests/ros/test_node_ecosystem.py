@@ -2,7 +2,8 @@
 
 - ``sensor_msgs/JointState`` commands on ``~/joint_commands`` (the ``topic_based_ros2_control``
   convention: names in any order) drive a lockstep twin exactly as an offline run of the same
-  lengths; an unknown name is rejected naming the topic and the name;
+  lengths; an unknown name is rejected naming the topic and the name; the recording replays
+  bit-identically;
 - two twins in two namespaces side by side: each answers only its own commands, topics and the
   recording follow the namespace, the platform frames carry the namespace as prefix;
 - the managed node: configure / activate / deactivate / cleanup / shutdown through
@@ -15,6 +16,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -30,6 +33,7 @@ from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
 from ros2_node import messages as M  # noqa: E402
+from ros2_node.bag.reader import BagReader  # noqa: E402
 from ros2_node.convert import message_class, to_ros  # noqa: E402
 from ros2_node.twin import TwinRunner  # noqa: E402
 
@@ -132,7 +136,9 @@ def _joint_state(names, lengths, order):
 def test_joint_state_commands_drive_the_twin_like_float64_commands(tmp_path, dds_env, stewart):
     model, program = stewart
     names = list(model.actuators.names)
-    node = NodeProcess([SCENE, "--mode", "lockstep", "--publish-rate", "1000"], dds_env, tmp_path / "node.log")
+    bag = tmp_path / "bag"
+    node = NodeProcess([SCENE, "--mode", "lockstep", "--publish-rate", "1000", "--mcap", str(bag)], dds_env,
+                       tmp_path / "node.log")
     client = Client()
     statuses = client.listen(STATUS, "/flexmb_twin/status")
     joints = client.listen(JS, "/joint_states")
@@ -172,12 +178,15 @@ def test_joint_state_commands_drive_the_twin_like_float64_commands(tmp_path, dds
     last = statuses[-1]
     assert last.rejected_commands == 1 and last.steps == steps + 1
     assert "/flexmb_twin/joint_commands: rejected (unknown_name): unknown actuator names [no_such_leg]" in log
+    # recorded like the other command topics, and replayed offline to the last bit
+    assert BagReader(bag).counts()["/flexmb_twin/joint_commands"] == steps + 1
+    p = subprocess.run([sys.executable, "-m", "ros2_node.cli", "replay", str(bag)], cwd=ROOT, env=dds_env,
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0 and "bit-identical" in p.stdout, p.stdout + p.stderr
 
 
 @pytest.mark.timeout(300)
 def test_two_namespaced_twins_run_side_by_side_without_crosstalk(tmp_path, dds_env, stewart):
-    from ros2_node.bag.reader import BagReader
-
     model, program = stewart
     names = list(model.actuators.names)
     bag = tmp_path / "robot1_bag"
