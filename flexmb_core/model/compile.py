@@ -200,8 +200,10 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
                 fixed[ids] = True
         if s.type in ("clamp", "ball", "driven"):
             fixed[node_ydofs[n]] = True
+        if s.type == "roller":                          # the position along the axis 'normal' only
+            fixed[node_ydofs[n][int(np.argmax(np.abs(s.normal)))]] = True
         if s.type == "driven":
-            drive_rows.append((node_ydofs[n], np.asarray(scene.nodes[s.node], dtype=float),
+            drive_rows.append((node_ydofs[n], np.asarray(node_x[n], dtype=float),   # a shell point too
                                s.direction or (0.0, 0.0, 0.0), s.distance, s.axis or (0.0, 0.0, 1.0), s.angle))
         if s.type == "revolute":
             fixed[node_ydofs[n]] = True

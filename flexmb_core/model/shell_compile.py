@@ -39,15 +39,21 @@ def generate_mesh(spec: Shell, nodes: dict) -> shell_mesh.ShellMesh:
         return shell_mesh.triangle([nodes[c] for c in m.corners], m.divisions[0])
     if m.kind == "annulus":
         return shell_mesh.annulus(m.center, m.axis, m.reference, m.inner_radius, m.outer_radius, m.angles,
-                                  m.divisions, m.pattern)
+                                  m.divisions, m.pattern, m.closed)
+    if m.kind == "spherical_cap":
+        return shell_mesh.spherical_cap(m.center, m.axis, m.reference, m.radius, m.polar_angles, m.angles,
+                                        m.divisions, m.pattern, m.closed)
     return shell_mesh.cylinder(m.center, m.axis, m.reference, m.radius, m.length, m.angles, m.divisions,
-                               m.pattern)
+                               m.pattern, m.closed)
 
 
 def number_shell_nodes(scene: Scene, node_lookup: dict, node_names: list, node_x: list, ydof: list,
                        member_nodes: dict[str, np.ndarray], take) -> list[ShellDraft]:
     """Give every shell mesh node a global node (new, a named corner, or the coincident node of an
     edge or member it is hinged to) and allocate positions (shared per node), G and a (per shell).
+    A hinge line listing two edges of one shell closes it onto itself: their coincident nodes share
+    a global node (a position), each keeping its own G and a. The scene's shell points are then
+    registered in ``node_lookup`` under their names (:func:`resolve_shell_points`).
 
     ``take(values, kind)`` allocates DOFs (kind 0 position, 1 vector/scalar) and returns the first id.
     """
@@ -58,6 +64,7 @@ def number_shell_nodes(scene: Scene, node_lookup: dict, node_names: list, node_x
         mesh = generate_mesh(spec, scene.nodes)
         where = f"{scene.source}:shells.{spec.name}"
         ids = np.full(mesh.x.shape[0], -1, dtype=np.int64)
+        alias = np.arange(mesh.x.shape[0])          # mesh node → the mesh node whose position it shares
         for k, name in zip(mesh.corners, spec.mesh.corners):
             ids[k] = node_lookup[name]
         for j in scene.shell_joints:
@@ -66,40 +73,44 @@ def number_shell_nodes(scene: Scene, node_lookup: dict, node_names: list, node_x
             mine = [e for e in j.edges if e[0] == spec.name]
             if not mine:
                 continue
-            anchor = None
+            anchor, other = None, ""
             if j.member is not None:
-                anchor = member_nodes[j.member]
+                anchor, other = member_nodes[j.member], j.member
             else:
                 done = [e for e in j.edges if e in built_edges]
                 if done:
-                    anchor = built_edges[done[0]]
+                    anchor, other = built_edges[done[0]], f"edge {done[0][0]}.{done[0][1]}"
             if anchor is None:
+                for e in mine[1:]:                   # the shell closed onto itself along mine[0]
+                    _pair_self(mesh, mine[0][1], e[1], alias, size, where)
                 continue
-            edge_nodes = mesh.edges[mine[0][1]]
-            other = j.member if j.member is not None else f"edge {done[0][0]}.{done[0][1]}"
-            if anchor.size != edge_nodes.size:
-                raise SceneError(where, f"edge '{mine[0][1]}' has {edge_nodes.size} nodes but {other} has "
-                                        f"{anchor.size}; a hinge line pairs nodes one to one (a cubic member "
-                                        "needs 'elements' equal to the edge's divisions)")
             anchor_x = np.array([node_x[n] for n in anchor])
-            for k in edge_nodes:
-                dist = np.linalg.norm(anchor_x - mesh.x[k], axis=1)
-                m = int(np.argmin(dist))
-                if dist[m] > 1e-9 * size:
-                    raise SceneError(where, f"edge '{mine[0][1]}' node at {np.round(mesh.x[k], 9).tolist()} has no "
-                                            f"coincident node on {other} (nearest {dist[m]:.3g} m away)")
-                if ids[k] >= 0 and ids[k] != anchor[m]:
-                    raise SceneError(where, f"corner node '{node_names[ids[k]]}' coincides with node "
-                                            f"'{node_names[anchor[m]]}' of {other}; name the same node in both")
-                ids[k] = anchor[m]
+            for e in mine:
+                edge_nodes = mesh.edges[e[1]]
+                if anchor.size != edge_nodes.size:
+                    raise SceneError(where, f"edge '{e[1]}' has {edge_nodes.size} nodes but {other} has "
+                                            f"{anchor.size}; a hinge line pairs nodes one to one (a cubic member "
+                                            "needs 'elements' equal to the edge's divisions)")
+                for k in edge_nodes:
+                    m = _coincident(anchor_x, mesh.x[k], size, where, f"edge '{e[1]}'", other)
+                    if ids[k] >= 0 and ids[k] != anchor[m]:
+                        raise SceneError(where, f"corner node '{node_names[ids[k]]}' coincides with node "
+                                                f"'{node_names[anchor[m]]}' of {other}; name the same node in both")
+                    ids[k] = anchor[m]
         for k in range(ids.size):
-            if ids[k] < 0:
+            if ids[k] < 0 and alias[k] == k:
                 name = f"{spec.name}/{k}"
                 node_lookup[name] = len(node_names)
                 node_names.append(name)
                 node_x.append(mesh.x[k])
                 ydof.append(-1)
                 ids[k] = node_lookup[name]
+        for k in range(ids.size):
+            if alias[k] != k:
+                if ids[k] >= 0 and ids[k] != ids[alias[k]]:
+                    raise SceneError(where, f"corner node '{node_names[ids[k]]}' lies on both edges of the "
+                                            "self-closing hinge line; name no corner there")
+                ids[k] = ids[alias[k]]
         gdofs = np.empty((ids.size, 3), dtype=np.int64)
         adofs = np.empty(ids.size, dtype=np.int64)
         for k, n in enumerate(ids):
@@ -110,7 +121,52 @@ def number_shell_nodes(scene: Scene, node_lookup: dict, node_names: list, node_x
         for e, nodes_e in mesh.edges.items():
             built_edges[(spec.name, e)] = ids[nodes_e]
         drafts.append(ShellDraft(spec, mesh, ids, gdofs, adofs))
+    resolve_shell_points(scene, drafts, node_lookup)
     return drafts
+
+
+def _coincident(candidates: np.ndarray, x: np.ndarray, size: float, where: str, what: str, other: str) -> int:
+    """Index of the candidate position at ``x`` (within 10⁻⁹ of the model size), else a SceneError."""
+    dist = np.linalg.norm(candidates - x, axis=1)
+    m = int(np.argmin(dist))
+    if dist[m] > 1e-9 * size:
+        raise SceneError(where, f"{what} node at {np.round(x, 9).tolist()} has no coincident node on {other} "
+                                f"(nearest {dist[m]:.3g} m away)")
+    return m
+
+
+def _pair_self(mesh: shell_mesh.ShellMesh, first: str, second: str, alias: np.ndarray, size: float,
+               where: str) -> None:
+    """Let every node of edge ``second`` share the position of its coincident node on ``first``."""
+    a, b = mesh.edges[first], mesh.edges[second]
+    if a.size != b.size:
+        raise SceneError(where, f"edge '{second}' has {b.size} nodes but edge '{first}' has {a.size}; a hinge line "
+                                "pairs nodes one to one")
+    size = max(size, float(np.ptp(mesh.x, axis=0).max()))
+    for k in b:
+        m = a[_coincident(mesh.x[a], mesh.x[k], size, where, f"edge '{second}'", f"edge '{first}'")]
+        if m != k:
+            alias[k] = alias[m]
+
+
+def resolve_shell_points(scene: Scene, drafts: list[ShellDraft], node_lookup: dict) -> None:
+    """Register every shell point (:class:`~flexmb_core.scene.schema.ShellPoint`) in ``node_lookup``:
+    its name → the global node of the mesh node nearest to ``at`` (on its edge when given); a
+    SceneError naming the point's key when none lies within its tolerance."""
+    by_name = {d.spec.name: d for d in drafts}
+    for p in scene.shell_points:
+        d = by_name[p.shell]
+        cand = d.mesh.edges[p.edge] if p.edge is not None else np.arange(d.mesh.x.shape[0])
+        dist = np.linalg.norm(d.mesh.x[cand] - np.asarray(p.at, dtype=float), axis=1)
+        i = int(np.argmin(dist))
+        tol = p.tolerance if p.tolerance is not None else 1e-6 * max(float(np.ptp(d.mesh.x, axis=0).max()), 1e-300)
+        if dist[i] > tol:
+            on = f" on edge '{p.edge}'" if p.edge else ""
+            raise SceneError(f"{scene.source}:{p.where}",
+                             f"no mesh node of shell '{p.shell}'{on} within {tol:.3g} m of {list(p.at)} (nearest "
+                             f"{dist[i]:.3g} m away, at {np.round(d.mesh.x[cand[i]], 6).tolist()}); refine the mesh "
+                             "so that a node falls there, or give a 'tolerance' (m)")
+        node_lookup[p.name] = int(d.nodes[cand[i]])
 
 
 def _model_size(node_x: list) -> float:
@@ -195,7 +251,9 @@ def element_dofs(info: ShellInfo, tri: np.ndarray) -> np.ndarray:
 
 def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.ndarray]:
     """Prescribed DOF ids of the edge supports: clamp fixes Y and G of every edge node, ball fixes Y
-    (a fixed hinge line). The strain rate a stays free (the thickness may still change)."""
+    (a fixed hinge line), roller with the normal n = ±e_i fixes Y_i, symmetry with the plane normal n = ±e_i fixes Y_i and G_i (the node stays
+    in the plane, the director too: see :func:`~flexmb_core.scene.shells.parse_edge_support`). The
+    strain rate a stays free (the thickness may still change)."""
     by_name = {i.name: i for i in infos}
     out = []
     for s in scene.supports:
@@ -203,10 +261,35 @@ def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.nda
             continue
         info = by_name[s.edge[0]]
         k = info.edges[s.edge[1]]
+        if s.type in ("symmetry", "roller"):
+            comp = int(np.argmax(np.abs(s.normal)))
+            out.append(info.ydofs[k, comp])
+            if s.type == "symmetry":
+                _check_symmetry_edge(scene, s, info, k, comp)
+                out.append(info.gdofs[k, comp])
+            continue
         out.append(info.ydofs[k].ravel())
         if s.type == "clamp":
             out.append(info.gdofs[k].ravel())
     return out
+
+
+def _check_symmetry_edge(scene: Scene, s, info: ShellInfo, k: np.ndarray, comp: int) -> None:
+    """A symmetry edge lies in one plane x_i = const and the shell crosses it at a right angle
+    (its reference director in the plane), else fixing x_i and G_i is no symmetry: a SceneError."""
+    where = f"{scene.source}:supports (symmetry of {s.edge[0]}.{s.edge[1]})"
+    xi = info.x0[k, comp]
+    size = max(float(np.ptp(info.x0, axis=0).max()), 1e-300)
+    axis = "xyz"[comp]
+    if np.ptp(xi) > 1e-9 * size:
+        raise SceneError(where, f"the edge is not in a plane {axis} = const ({axis} from {xi.min():.6g} to "
+                                f"{xi.max():.6g} m); a symmetry edge lies in its symmetry plane")
+    off = np.abs(info.normal0[k, comp])
+    if off.max() > 1e-6:
+        j = int(np.argmax(off))
+        raise SceneError(where, f"the shell does not meet the plane {axis} = {xi[0]:.6g} at a right angle (normal "
+                                f"{np.round(info.normal0[k[j]], 6).tolist()} at {np.round(info.x0[k[j]], 6).tolist()}); "
+                                "across a symmetry plane the surface continues as its mirror image")
 
 
 def clamp_node_gdofs(infos: tuple[ShellInfo, ...], node_id: int) -> list[np.ndarray]:

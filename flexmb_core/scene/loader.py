@@ -15,7 +15,8 @@ from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, ServoSpec, Signal, SolverSpec, Support)
 from .schema import ArcLengthSpec, DisplacementControlSpec, DofComponent, PathStepSpec
-from .shells import edge_ref, parse_edge_loads, parse_shell, parse_shell_joint
+from .include import compose
+from .shells import axis_normal, edge_ref, parse_edge_loads, parse_edge_support, parse_shell_joint, parse_shells, place_points
 
 OUTPUT_KINDS = {
     "node_position": ("node",),
@@ -60,12 +61,14 @@ def load_scene(path: str | Path, overrides: dict[str, Any] | None = None, *,
     ``limits`` bound the file, its alias expansion and (in :func:`compile_scene`) its size."""
     text = read_scene_text(path, limits)
     data = parse_yaml(text, str(path), limits)
-    return scene_from_dict(data, source=str(path), overrides=overrides)
+    return scene_from_dict(data, source=str(path), overrides=overrides, limits=limits)
 
 
 def scene_from_dict(data: Any, source: str = "<dict>",
-                    overrides: dict[str, Any] | None = None) -> Scene:
-    """Validate a scene given as nested dicts (as parsed from YAML)."""
+                    overrides: dict[str, Any] | None = None, *, limits: Limits | None = None) -> Scene:
+    """Validate a scene given as nested dicts (as parsed from YAML); its ``include:`` files are
+    read relative to ``source``'s folder (:mod:`flexmb_core.scene.include`)."""
+    data = compose(data, source, limits)
     root = Node(data, "", source).mapping(
         {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
          "point_masses", "damping", "solver", "outputs", "commands", "joints", "shells"},
@@ -81,17 +84,19 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     if not materials:
         raise root.fail("at least one material is required", "materials")
     members = {k: _member(k, n, materials, sections, nodes) for k, n in root.get("members", {}).items()}
-    shells = {k: parse_shell(k, n, materials, nodes) for k, n in root.get("shells", {}).items()}
+    shells, points = parse_shells(root.get("shells", {}), materials, nodes)
+    root = place_points(root, shells, points)         # node: {shell, at} → a generated point name
+    refs = {**nodes, **{k: p.at for k, p in points.items()}}   # what supports, loads, outputs may name
     if not members and not shells:
         raise root.fail("a scene needs at least one member or one shell", "members")
     clash = sorted(set(members) & set(shells))
     if clash:
         raise root.fail(f"name(s) {name_list(clash)} are used by both a member and a shell; names must be unique", "shells")
 
-    supports = tuple(_support(n, nodes, members, shells) for n in root.get("supports", []).list())
-    forces, moments, gravity = _loads(root.get("loads", {}), nodes, members)
+    supports = tuple(_support(n, refs, members, shells) for n in root.get("supports", []).list())
+    forces, moments, gravity = _loads(root.get("loads", {}), refs, members)
     edge_loads = parse_edge_loads(root.get("loads", {}), shells)
-    pmasses = tuple(PointMass(k, n.mapping({"node", "mass"}, {"node", "mass"}).get("node").name_in(nodes, "node"),
+    pmasses = tuple(PointMass(k, n.mapping({"node", "mass"}, {"node", "mass"}).get("node").name_in(refs, "node"),
                               n.get("mass").number(positive=True, unit="kg"))
                     for k, n in root.get("point_masses", {}).items())
     damp = root.get("damping", {})
@@ -101,7 +106,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     damp = damp.mapping({"mass_proportional"})
     c_m = damp.get("mass_proportional", 0.0).number(nonneg=True, unit="1/s")
     solver = _solver(root.get("solver", {}), overrides or {}, nodes)
-    outputs = tuple(_output(k, n, nodes, members, shells) for k, n in root.get("outputs", {}).items())
+    outputs = tuple(_output(k, n, refs, members, shells) for k, n in root.get("outputs", {}).items())
     commands = _commands(root.get("commands"), members) if root.has("commands") else None
     joint_nodes = root.get("joints", []).list()
     shell_types = ("hinge_line", "shell_rigid")
@@ -111,7 +116,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
                          if isinstance(n.value, dict) and n.value.get("type") in shell_types)
     return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
                  moments, pmasses, gravity, c_m, solver, outputs, commands, joints, shells, shell_joints,
-                 edge_loads)
+                 edge_loads, tuple(points.values()))
 
 
 def _joint(n: Node, nodes, members) -> Joint:
@@ -301,17 +306,19 @@ def _servo(n: Node) -> ServoSpec:
 
 
 def _support(n: Node, nodes, members, shells) -> Support:
-    n.mapping({"node", "edge", "type", "member", "vector", "rotation", "translation", "axis"}, {"type"})
+    n.mapping({"node", "edge", "type", "member", "vector", "rotation", "translation", "axis", "normal"}, {"type"})
     if n.has("edge"):
-        if n.has("node"):
-            raise n.fail("a support is on a 'node' or on a shell 'edge', not both")
-        extra = sorted(k for k in n.value if k not in ("edge", "type"))
-        if extra:
-            raise n.fail(f"key(s) {name_list(extra)} do not apply to an edge support; expected 'edge' and 'type'")
-        typ = n.get("type").string(("clamp", "ball"))
-        return Support("", typ, edge=edge_ref(n.get("edge"), shells))
-    typ = n.get("type").string(("clamp", "ball", "fixed_vector", "revolute", "driven"))
+        return parse_edge_support(n, shells)
+    typ = n.get("type").string(("clamp", "ball", "roller", "fixed_vector", "revolute", "driven"))
     node = n.get("node").name_in(nodes, "node")
+    if typ == "roller":                                 # fixes the position along 'normal' only
+        extra = sorted(k for k in n.value if k not in ("node", "type", "normal"))
+        if extra:
+            raise n.fail(f"key(s) {name_list(extra)} do not apply to a roller; expected 'node', 'type', 'normal'")
+        return Support(node, typ, normal=axis_normal(n, typ))
+    if n.has("normal"):
+        raise n.fail(f"'normal' applies to roller supports and shell-edge symmetry supports (type is '{typ}')",
+                     "normal")
     member = n.get("member").name_in(members, "member") if n.has("member") else None
     vector = None
     if typ == "fixed_vector":
@@ -501,7 +508,6 @@ def _displacement_control(n: Node, nodes: dict) -> DisplacementControlSpec:
     if to == 0.0:
         raise n.fail("expected a non-zero target displacement (m), got 0", "to")
     return DisplacementControlSpec(dof, to, _path_step(n, "displacement increment"))
-
 
 
 def _output(name: str, n: Node, nodes, members, shells) -> Output:

@@ -116,10 +116,14 @@ class ShellMeshSpec:
     ``rectangle``: bilinear patch through 4 ``corners`` (scene nodes), ``divisions`` (n_u, n_v);
     ``triangle``: 3 ``corners``, ``divisions`` (n,); ``annulus``: flat sector about ``center`` with
     normal ``axis``, radii, ``angles`` (rad) from ``reference``; ``cylinder``: patch of ``radius`` and
-    ``length`` along ``axis`` from ``center``, ``angles`` (rad) from ``reference``.
+    ``length`` along ``axis`` from ``center``, ``angles`` (rad) from ``reference``;
+    ``spherical_cap``: sphere of ``radius`` about ``center``, ``polar_angles`` [α0, α1] (rad) from the
+    pole ``axis`` (α0 > 0: a polar hole; α0 = 0: closed at the pole), ``angles`` (rad) from
+    ``reference``. ``closed`` (annulus, cylinder, cap; a full turn of ``angles``): the seam is joined
+    (shared mesh nodes), not slit.
     """
 
-    kind: str                        # rectangle | triangle | annulus | cylinder
+    kind: str                        # rectangle | triangle | annulus | cylinder | spherical_cap
     divisions: tuple[int, ...]
     corners: tuple[str, ...] = ()
     pattern: str = "alternate"       # cell diagonals: alternate | right | left
@@ -131,6 +135,8 @@ class ShellMeshSpec:
     radius: float = 0.0
     length: float = 0.0
     angles: tuple[float, float] = (0.0, 0.0)
+    polar_angles: tuple[float, float] = (0.0, 0.0)
+    closed: bool = False
 
 
 @dataclass(frozen=True)
@@ -145,6 +151,23 @@ class Shell:
     thickness: float
     material: str
     quadrature: tuple[int, int] = (4, 3)
+
+
+@dataclass(frozen=True)
+class ShellPoint:
+    """A mesh node of ``shell`` chosen by its reference position: the node nearest to ``at`` (m),
+    which must lie within ``tolerance`` (m; None: 10⁻⁶ of the shell's size) — on ``edge`` only when
+    given (the coincident nodes of a slit). ``name`` is how supports, loads, point masses and
+    outputs refer to it as a node: ``shell.point`` for the named points of ``shells.<shell>.points``,
+    a generated ``shell@key`` for a coordinate given in place (``node: {shell, at}``). ``where`` is
+    the scene key errors name."""
+
+    name: str
+    shell: str
+    at: Vec3
+    edge: str | None = None
+    tolerance: float | None = None
+    where: str = ""
 
 
 @dataclass(frozen=True)
@@ -178,7 +201,7 @@ class EdgeLoad:
 @dataclass(frozen=True)
 class Support:
     node: str                        # "" for an edge support
-    type: str                        # clamp | ball | fixed_vector | revolute | driven
+    type: str                        # clamp | ball | roller | symmetry (edges) | fixed_vector | revolute | driven
     member: str | None = None
     vector: str | None = None        # v1 | v2 (fixed_vector)
     axis: tuple[float, float, float] | None = None        # driven: rotation axis (unit)
@@ -186,6 +209,7 @@ class Support:
     direction: tuple[float, float, float] | None = None   # driven: translation direction (unit)
     distance: Signal | None = None                        # driven: translation s(t) (m)
     edge: EdgeRef | None = None      # a shell edge instead of a node: clamp (Y, G) or ball (Y) on every node
+    normal: Vec3 | None = None       # roller (node, edge) / symmetry (edge): the plane's unit normal, along x, y or z
 
 
 @dataclass(frozen=True)
@@ -370,3 +394,4 @@ class Scene:
     shells: dict[str, Shell] = field(default_factory=dict)
     shell_joints: tuple[ShellJoint, ...] = ()
     edge_loads: tuple[EdgeLoad, ...] = ()
+    shell_points: tuple[ShellPoint, ...] = ()    # mesh nodes named by coordinates (named or in place)

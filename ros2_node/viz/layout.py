@@ -99,7 +99,7 @@ class TwinLayout:
                     pts.append(info.x0[j])
                     labels.append(f"{s.edge[0]}.{s.edge[1]}[{j}] ({s.type})")
             else:
-                pts.append(scene.nodes[s.node])
+                pts.append(model.q0[model.node_ydofs[model.node(s.node)]])   # a scene node or a shell point
                 labels.append(f"{s.node} ({s.type})")
         pts = np.array(pts, dtype=float).reshape(-1, 3)
         xyz = np.array(list(scene.nodes.values()), dtype=float).reshape(-1, 3)
