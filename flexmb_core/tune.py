@@ -499,4 +499,4 @@ def _timing_note(result: TuneResult) -> str:
             "of each round's candidates in parallel (`timed: parallel`, a screen only: runs at the same time "
             f"slow each other down); the passing candidates within {RETIME_BAND:g}× the least stepping CPU time, "
             "and the scene they are compared with, timed again one at a time on one worker (`timed: re-timed`). "
-            "Only re-timed wall times decide.")
+            "Only re-timed wall times decide; the reference's time above is from the parallel round.")
