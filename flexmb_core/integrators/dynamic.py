@@ -128,16 +128,21 @@ class DynamicIntegrator:
 
     # -- start ------------------------------------------------------------------------------
     def warmup(self, state: State) -> None:
-        """Compile (or load) the numba step on a throwaway copy of ``state``; :meth:`initialize`
-        then resets what it touched (held tangent, loads, the guard's ledger)."""
+        """Compile (or load) every kernel a step calls — the numba step, or the Python Newton's
+        kernels and the step guard's — by one throwaway step on a copy of ``state``, so that none
+        compiles inside the time loop (a first real-time step would miss its deadline by seconds);
+        :meth:`initialize` then resets what it touched (held tangent, loads, the guard's ledger)."""
+        st = state.copy()
         if self.fast is not None:
-            st = state.copy()
             self.fast.attempt(st, self.spec.dt, st.lam.copy())
             self.fast.invalidate()
-            self._t_hist = math.nan         # no stretch history from the throwaway step
-            self._factored_coef = None
-            self._tangent_age = 0
-            self.tangent_updates = 0
+        else:
+            self.initialize(st)
+            self._newton(st, self.spec.dt, st.lam.copy())
+        self._t_hist = math.nan             # no stretch history from the throwaway step
+        self._factored_coef = None
+        self._tangent_age = 0
+        self.tangent_updates = 0
 
     def initialize(self, state: State) -> StepResult:
         """Consistent initial acceleration ``M_ff a_f = (f_ext − f_int − C v)_f`` (or zero)."""
