@@ -1,8 +1,12 @@
 """``flexmb node SCENE``: the twin as a ROS 2 node (rclpy, real DDS).
 
-Commands in (``~/commands``, ``~/actuator_commands``, ``~/joint_trajectory``), the flexible
-mechanism out (``/joint_states``, ``~/actuator_states``, ``~/platform_pose``, ``~/shape``,
-``~/status``, ``/clock``, ``/diagnostics``); names and types in :mod:`ros2_node.topics`.
+Commands in (``~/commands``, ``~/actuator_commands``, ``~/joint_trajectory``, ``~/joint_commands``),
+the flexible mechanism out (``joint_states``, ``~/actuator_states``, ``~/platform_pose``, ``~/shape``,
+``~/status``, ``/clock``, ``/tf``, ``/diagnostics``); names and types in :mod:`ros2_node.topics`,
+resolved by rclpy (namespace, remapping; what the recordings store). A managed (lifecycle) node
+(configure = compile + warm-up, activate = step, deactivate = hold, cleanup) with the services
+``~/reset``, ``~/pause``, ``~/resume`` and ``~/step`` (:class:`TwinNode`). QoS: outputs reliable,
+command inputs best effort, both overridable per topic by ROS 2's ``qos_overrides.*`` parameters.
 
 Three threads, so that the time loop never waits for the interpreter's other work:
 
