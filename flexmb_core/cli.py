@@ -230,8 +230,8 @@ def _run_keys(spec, sim, path, error: str) -> dict:
         error = (f"snap-through at load step {first['step']} (t = {first['t']:.6g}): {first['kind']} "
                  f"(negative pivots {first['negative_pivots'][0]} → {first['negative_pivots'][1]}, the step "
                  f"moved {first['jump_ratio']:.3g}× its tangent prediction); load stepping cannot follow "
-                 f"the path past a limit point: use solver.control: arc_length, or allow it with "
-                 f"solver.allow_snap_through: true")
+                 f"the path past a critical point: trace it with solver.control: arc_length, or allow "
+                 f"the snap with solver.allow_snap_through: true")
     return {"control": "load", "dt": spec.dt, "until": spec.until, "snap_through": snap, "error": error}
 
 

@@ -8,7 +8,7 @@ With Lagrange multipliers (rigid corners, hinges, ties) the system is a saddle p
 constraints' null space plus one negative pivot per multiplier, a constant — changes still mark
 the critical points of the constrained structure.
 
-:class:`PivotCounter` counts; :func:`classify` names what a change of the count was:
+:class:`TangentLU` factors, solves and counts; :func:`classify` names what a change of the count was:
 
 - a **limit point** when the load factor has an extremum there (its derivative along the path,
   dλ/ds from the tangent at each converged point, changes sign): ``load_maximum`` /
@@ -28,19 +28,33 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..model.model import Model
 from ..solvers.banded import SingularPivotError, SkylineLU
+from ..solvers.linear import SparseLU
 
 
-class PivotCounter:
-    """Negative pivots of the system tangent (CSR values on ``model``'s pattern).
+class TangentLU:
+    """LU of the system tangent (CSR values on ``model``'s pattern) that also counts its negative pivots.
 
     Without multipliers the skyline LU keeps its cheapest ordering. With multipliers the free DOFs
     are numbered first (reverse Cuthill–McKee) and the multipliers last, so no zero pivot of the
-    constraint block is met before the DOFs it couples.
+    constraint block is met before the DOFs it couples. Where the skyline meets a zero pivot
+    anyway, SuperLU with partial pivoting solves and the count is unknown (``None``); where it
+    only meets a tiny one (a model without multipliers next to a critical point) the count stands
+    and SuperLU solves.
+
+    Attributes
+    ----------
+    negative_pivots : int | None — of the last factorization.
+    fallbacks : int — factorizations SuperLU had to do.
     """
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, *, min_pivot_ratio: float = 1e-10):
         n, nf = model.nsys, model.nfree
-        self._map: np.ndarray | None = None
+        self.min_pivot_ratio = min_pivot_ratio
+        self.negative_pivots: int | None = None
+        self.fallbacks = 0
+        self._superlu = SparseLU(model)
+        self._skyline_ok = False
+        self._perm: np.ndarray | None = None
         if model.n_multipliers == 0:
             self.lu = SkylineLU(n, model.indptr, model.indices)
             return
@@ -52,22 +66,51 @@ class PivotCounter:
         pos = sp.csr_matrix((np.arange(1, model.nnz + 1, dtype=float), model.indices, model.indptr),
                             shape=(n, n))[perm][:, perm].tocsr()
         pos.sort_indices()
+        self._perm = perm
         self._map = np.ascontiguousarray(pos.data.astype(np.int64) - 1)
         self._buf = np.zeros(model.nnz)
+        self._b = np.zeros(n)
         self.lu = SkylineLU(n, pos.indptr.astype(np.int64), pos.indices.astype(np.int64), ordering="natural")
 
-    def count(self, kdata: np.ndarray) -> int | None:
-        """Negative pivots of the tangent ``kdata (nnz,)``; ``None`` when a pivot is (near) zero
-        (the state sits on a critical point, or the constraint-free block is singular)."""
+    def factor(self, kdata: np.ndarray) -> None:
+        """Factor the tangent ``kdata (nnz,)``; ``RuntimeError`` when it is singular."""
         data = kdata
-        if self._map is not None:
+        if self._perm is not None:
             np.take(kdata, self._map, out=self._buf)
             data = self._buf
         try:
             self.lu.factor(data)
         except SingularPivotError:
+            self._skyline_ok, self.negative_pivots = False, None
+        else:
+            self.negative_pivots = self.lu.negative_pivots
+            # a tiny pivot of the free block is near-singular K (solve with pivoting then); with
+            # multipliers the last pivots are Schur complements −G K⁻¹ Gᵀ, small by their units
+            self._skyline_ok = self._perm is not None or self.lu.min_pivot_ratio >= self.min_pivot_ratio
+        if self._skyline_ok:
+            return
+        self.fallbacks += 1
+        self._superlu.factor(kdata)            # raises RuntimeError if truly singular
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``x (nsys,)`` with the last factorization."""
+        if not self._skyline_ok:
+            return self._superlu.solve(b)
+        if self._perm is None:
+            return self.lu.solve(b)
+        np.take(b, self._perm, out=self._b)
+        y = self.lu.solve(self._b)
+        x = np.empty_like(y)
+        x[self._perm] = y
+        return x
+
+    def count(self, kdata: np.ndarray) -> int | None:
+        """Factor ``kdata`` and return its negative pivots (``None``: unknown or singular)."""
+        try:
+            self.factor(kdata)
+        except RuntimeError:
             return None
-        return self.lu.negative_pivots
+        return self.negative_pivots
 
 
 @dataclass
@@ -117,7 +160,7 @@ def _vertex(p0: PathPoint, p1: PathPoint) -> tuple[float, float]:
 
 
 def _entry(step: int, lam: float, u: float, kind: str, before: int, after: int) -> dict:
-    return {"step": step, "load_factor": lam, "displacement": u if np.isfinite(u) else None,
+    return {"step": step, "load_factor": float(lam), "displacement": float(u) if np.isfinite(u) else None,
             "kind": kind, "negative_pivots": [before, after]}
 
 

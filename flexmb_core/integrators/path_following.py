@@ -24,8 +24,8 @@ det K, which fails at bifurcations). Steps adapt to the path's curvature: after 
 ``i`` iterations the next is scaled by √(target_iterations / i), within [½, 2]× and
 [``min``, ``max``].
 
-After every step the tangent at the converged state is factored once more to count its
-negative pivots (:mod:`flexmb_core.integrators.critical`): limit points and bifurcations.
+After every step the tangent at the converged state is factored once more; its negative pivots
+(counted by the same LU) (:mod:`flexmb_core.integrators.critical`): limit points and bifurcations.
 
 The pseudo-time of a path-following run is the increment count (``state.t = k``) so recorders
 see a monotonic clock; the load factor is reported beside it.
@@ -44,9 +44,8 @@ from ..kernels.moments import conservative_moments, follower_moments
 from ..model.assembly import apply_drives, assemble
 from ..model.model import Model
 from ..scene.schema import DofComponent, PathStepSpec, Scene, SolverSpec
-from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
-from .critical import PathPoint, PivotCounter, classify
+from .critical import PathPoint, TangentLU, classify
 from .energy import energies
 
 if TYPE_CHECKING:
@@ -170,8 +169,7 @@ class PathFollower:
         self.steps: PathStepSpec = spec.arc_length.step if self.arc else spec.displacement.step
         self.psi2 = spec.arc_length.psi ** 2 if self.arc and spec.arc_length.kind == "spherical" else 0.0
         self.loads = PathLoads(model, self.ws)
-        self.lu = FixedPatternSolver(model)
-        self.pivots = PivotCounter(model)
+        self.lu = TangentLU(model)            # factors, solves and counts negative pivots
         self.w = position_mask(model)
         nf, n = model.nfree, model.nsys
         self._inv_scale = 1.0 / model.dof_scale[model.free]
@@ -269,8 +267,8 @@ class PathFollower:
         strain = self._residual(self.lam, True)
         ref = max(np.linalg.norm(self.ws.r[self.model.free]), np.linalg.norm(self.ws.f_ext[self.model.free]), 1e-300)
         rel = float(np.linalg.norm(self._rf[:self._nf]) / ref)
-        n_neg = self.pivots.count(self.ws.kdata)
         self.lu.factor(self.ws.kdata)
+        n_neg = self.lu.negative_pivots
         self._dt[:] = self._tangent_direction()
         if not self.points:                   # ‖u₁‖²: the spherical constraint's load scale (m²)
             self._u1sq = max(self._wdot(self._dt, self._dt), 1e-300)

@@ -31,7 +31,7 @@ from ..solvers.guard import StepGuard
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
-from .critical import PivotCounter
+from .critical import TangentLU
 from .energy import energies
 from .path_following import dof_index, position_mask
 
@@ -53,7 +53,7 @@ class SnapThroughMonitor:
 
     def __init__(self, model: Model, spec: SolverSpec):
         self.model = model
-        self.pivots = PivotCounter(model)
+        self.pivots = TangentLU(model)
         self.w = position_mask(model)[:model.nfree]
         self.monitor = dof_index(model, spec.monitor) if spec.monitor is not None else -1
         self.events: list[dict] = []
@@ -127,6 +127,13 @@ class StaticSolver:
         return res
 
     def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
+        # A diverging iterate overflows (norms of huge residuals, inf − inf): every value that
+        # matters is checked for finiteness and a failure is reported in the StepResult, so numpy
+        # need not print warnings on the way.
+        with np.errstate(all="ignore"):
+            return self._newton_steps(state, t, lam)
+
+    def _newton_steps(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         m, ws, spec = self.model, self.ws, self.spec
         free = m.free
         state.lam[:] = lam
@@ -139,40 +146,38 @@ class StaticSolver:
         inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
         nf = m.nfree
         rf = np.zeros(m.nsys)
-        # a diverging iterate overflows: the checks below report it, numpy need not warn
-        with np.errstate(all="ignore"):
-            for it in range(1, spec.max_iterations + 1):
-                strain = assemble(m, ws, q, lam, True, state.mult)
-                if it == 1:
-                    u_p = strain
-                    if m.n_multipliers:
-                        self._c_p[:] = ws.rc
-                rf[:nf] = (ws.r - ws.f_ext)[free]
-                rf[nf:] = ws.rc
-                if not np.all(np.isfinite(rf)):
-                    message = f"non-finite residual at iteration {it}"
-                    break
-                try:
-                    self.lu.factor(ws.kdata)
-                except RuntimeError as exc:
-                    message = (f"singular tangent at iteration {it} ({exc}); "
-                               "a mechanism with a free motion needs a support")
-                    break
-                dq = self.lu.solve(-rf)
-                if not np.all(np.isfinite(dq)):
-                    message = f"non-finite increment at iteration {it}"
-                    break
-                if it == 1 and self._predicted < 0.0:    # the tangent's prediction of the whole step
-                    self._predicted = float(np.linalg.norm(dq[:nf][self._w]))
-                q[free] += dq[:nf]
-                state.mult += dq[nf:]
-                inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
-                ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-                rel = float(np.linalg.norm(rf[:nf]) / ref)
-                viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
-                if inc <= spec.tolerance and viol <= spec.tolerance:
-                    converged = True
-                    break
+        for it in range(1, spec.max_iterations + 1):
+            strain = assemble(m, ws, q, lam, True, state.mult)
+            if it == 1:
+                u_p = strain
+                if m.n_multipliers:
+                    self._c_p[:] = ws.rc
+            rf[:nf] = (ws.r - ws.f_ext)[free]
+            rf[nf:] = ws.rc
+            if not np.all(np.isfinite(rf)):
+                message = f"non-finite residual at iteration {it}"
+                break
+            try:
+                self.lu.factor(ws.kdata)
+            except RuntimeError as exc:
+                message = (f"singular tangent at iteration {it} ({exc}); "
+                           "a mechanism with a free motion needs a support")
+                break
+            dq = self.lu.solve(-rf)
+            if not np.all(np.isfinite(dq)):
+                message = f"non-finite increment at iteration {it}"
+                break
+            if it == 1 and self._predicted < 0.0:    # the tangent's prediction of the whole step
+                self._predicted = float(np.linalg.norm(dq[:nf][self._w]))
+            q[free] += dq[:nf]
+            state.mult += dq[nf:]
+            inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
+            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
+            rel = float(np.linalg.norm(rf[:nf]) / ref)
+            viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
+            if inc <= spec.tolerance and viol <= spec.tolerance:
+                converged = True
+                break
         if not converged:
             if not message:
                 message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e})"
