@@ -5,7 +5,9 @@ For the cantilever B1 (SPEC §8), the spin-up maneuver (SPEC §7.6) and the Stew
 (Newmark / generalized-α with several ρ∞) and Newton strategy (full / modified); each run's error
 is measured against a converged reference (closed form where there is one, otherwise a fine run
 stored under ``benchmarks/reference/``). Installed peers (Exudyn, MuJoCo, PyElastica) run in the
-same process on the same cases. Outputs: ``workprecision.csv``, one PNG per case and
+same process on the same cases. The flexmb runs go one after another in this process, or with
+``--workers N`` / ``--scheduler ADDRESS`` as Dask tasks (``core.run_variants``; same errors, wall
+times of concurrent runs — see ``cli``). Outputs: ``workprecision.csv``, one PNG per case and
 ``workprecision.md`` in ``docs/benchmarks/`` (or ``--out``).
 
 Modules
