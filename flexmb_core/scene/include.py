@@ -12,9 +12,10 @@ Each included file is read, composed itself (its own ``include:`` resolved relat
 directory), then edited by its ``overrides`` — the dotted keys of ``flexmb replay --override``
 (``materials.steel.E``, ``supports.0.type``; :mod:`flexmb_core.scene.overrides`): every parent must
 exist, except that ``solver.KEY`` creates the ``solver`` block. The includes are merged in order,
-then this file's own keys on top: mappings merge key by key, anything else (lists such as
-``supports``, numbers, strings) replaces what came before, so a list is changed by an override of
-its item (``supports.1.type``) or given whole.
+then this file's own keys on top: mappings merge key by key, ``null`` removes a key (``angles:
+null``), anything else (lists such as ``supports``, numbers, strings) replaces what came before,
+so a list is changed by an override of its item (``supports.1.type``) or given whole (JSON Merge
+Patch, RFC 7386).
 
 A file that includes itself, directly or through others, is refused (``include cycle: a.yaml →
 b.yaml → a.yaml``), as are chains deeper than :data:`MAX_DEPTH`. Errors name
@@ -101,10 +102,14 @@ def _override(data: dict, overrides: Node) -> None:
 
 
 def merge(base: Any, top: Any) -> Any:
-    """``top`` over ``base``: mappings merge key by key (recursively), anything else replaces."""
+    """``top`` over ``base``: mappings merge key by key (recursively), a ``null`` in ``top`` removes
+    the key, anything else replaces (the rules of JSON Merge Patch, RFC 7386)."""
     if not (isinstance(base, dict) and isinstance(top, dict)):
         return top
     out = dict(base)
     for k, v in top.items():
-        out[k] = merge(out[k], v) if k in out else v
+        if v is None:
+            out.pop(k, None)
+        else:
+            out[k] = merge(out[k], v) if k in out else v
     return out

@@ -55,11 +55,11 @@ supports:
 
 def test_includes_compose_in_order_and_nest_relative_to_each_file(tmp_path):
     _write(tmp_path / "a" / "base.yaml", BASE)
-    _write(tmp_path / "a" / "mid.yaml", "include: base.yaml\nname: mid\nsolver: {dt: 0.25}\n")
+    _write(tmp_path / "a" / "mid.yaml", "include: base.yaml\nname: mid\nsolver: {dt: 0.25}\ndescription: null\n")
     _write(tmp_path / "b" / "mat.yaml", "materials: {steel: {E: 1.0e11, rho: 7000.0}}\n")
     top = _write(tmp_path / "top.yaml", "include: [a/mid.yaml, b/mat.yaml]\n")
     scene = load_scene(top)
-    assert scene.name == "mid"
+    assert scene.name == "mid" and scene.description == ""              # null removes a key
     assert scene.solver.dt == 0.25 and scene.solver.until == 1.0    # nested mappings merge
     assert scene.materials["steel"].E == 1.0e11 and scene.materials["steel"].nu == 0.3
 
