@@ -113,6 +113,21 @@ def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[
     return build_twin(read_setup(reader, scene_path), overrides, where=str(reader.path))
 
 
+def _recorded_solver(recorded: dict) -> dict:
+    """The recorded solver settings minus those equal to this flexmb's defaults.
+
+    A bag stores the whole effective ``SolverSpec``; handed back to the strict loader, keys that
+    apply to another analysis (the statics path-following keys of a dynamic run) would be refused
+    although nobody set them. A key equal to today's default changes nothing when dropped, and a
+    recorded value that differs from today's default is kept, so an old bag still replays with the
+    settings it was recorded with.
+    """
+    from flexmb_core.scene.schema import SolverSpec
+
+    defaults = {f.name: f.default for f in dataclasses.fields(SolverSpec) if f.default is not dataclasses.MISSING}
+    return {k: v for k, v in recorded.items() if not (k in defaults and v == defaults[k])}
+
+
 def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: str = "",
                values: dict[str, Any] | None = None) -> Twin:
     """Compile the twin of a :class:`TwinSetup` with ``KEY=VALUE`` scene edits (``solver.X`` keys win
@@ -135,7 +150,7 @@ def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: s
     data = parse_yaml(setup.scene_text)
     if not isinstance(data, dict):
         raise ReplayError(f"{setup.scene_source}: not a scene mapping")
-    solver = dict(setup.solver)
+    solver = _recorded_solver(setup.solver)
     solver.update(apply_overrides(data, overrides))
     for key, value in (values or {}).items():
         set_path(data, split_key(key), value, item=f"{key}={value!r}", flag="--fit")
