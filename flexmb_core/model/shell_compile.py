@@ -256,7 +256,7 @@ def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.nda
     strain rate a stays free (the thickness may still change)."""
     by_name = {i.name: i for i in infos}
     out = []
-    for s in scene.supports:
+    for i, s in enumerate(scene.supports):
         if s.edge is None:
             continue
         info = by_name[s.edge[0]]
@@ -265,7 +265,7 @@ def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.nda
             comp = int(np.argmax(np.abs(s.normal)))
             out.append(info.ydofs[k, comp])
             if s.type == "symmetry":
-                _check_symmetry_edge(scene, s, info, k, comp)
+                _check_symmetry_edge(f"{scene.source}:supports[{i}]", s, info, k, comp)
                 out.append(info.gdofs[k, comp])
             continue
         out.append(info.ydofs[k].ravel())
@@ -274,20 +274,19 @@ def edge_support_dofs(scene: Scene, infos: tuple[ShellInfo, ...]) -> list[np.nda
     return out
 
 
-def _check_symmetry_edge(scene: Scene, s, info: ShellInfo, k: np.ndarray, comp: int) -> None:
+def _check_symmetry_edge(where: str, s, info: ShellInfo, k: np.ndarray, comp: int) -> None:
     """A symmetry edge lies in one plane x_i = const and the shell crosses it at a right angle
     (its reference director in the plane), else fixing x_i and G_i is no symmetry: a SceneError."""
-    where = f"{scene.source}:supports (symmetry of {s.edge[0]}.{s.edge[1]})"
     xi = info.x0[k, comp]
     size = max(float(np.ptp(info.x0, axis=0).max()), 1e-300)
     axis = "xyz"[comp]
     if np.ptp(xi) > 1e-9 * size:
-        raise SceneError(where, f"the edge is not in a plane {axis} = const ({axis} from {xi.min():.6g} to "
+        raise SceneError(where, f"edge {s.edge[0]}.{s.edge[1]} is not in a plane {axis} = const ({axis} from {xi.min():.6g} to "
                                 f"{xi.max():.6g} m); a symmetry edge lies in its symmetry plane")
     off = np.abs(info.normal0[k, comp])
     if off.max() > 1e-6:
         j = int(np.argmax(off))
-        raise SceneError(where, f"the shell does not meet the plane {axis} = {xi[0]:.6g} at a right angle (normal "
+        raise SceneError(where, f"shell '{s.edge[0]}' does not meet the plane {axis} = {xi[0]:.6g} at a right angle (normal "
                                 f"{np.round(info.normal0[k[j]], 6).tolist()} at {np.round(info.x0[k[j]], 6).tolist()}); "
                                 "across a symmetry plane the surface continues as its mirror image")
 
