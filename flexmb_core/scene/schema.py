@@ -174,7 +174,8 @@ class ShellPoint:
 class ShellJoint:
     """``hinge_line``: the coincident nodes of the listed shell edges (and of ``member``, a frame
     or truss member laid along them) share their positions only; each shell keeps its own
-    director G, so the common line is a hinge (SPEC §5.3 (i)).
+    director G, so the common line is a hinge (SPEC §5.3 (i)). Two edges of one shell (the
+    ``start`` and ``end`` of a full turn) close it onto itself along a hinge.
     ``rigid``: at ``node`` (a corner of ``shell``), the shell's director G is tied to the frame
     ``member``'s section vectors by Lagrange multipliers, G = Σ α_j W_j (W = V1, V2, V1 × V2);
     with the shared position it transmits force and the two bending moments (the shell has no
