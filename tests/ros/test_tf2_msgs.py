@@ -95,3 +95,23 @@ def test_venv_node_publishes_tf_live(tmp_path, dds_env):
     stamps = [m.transforms[0].header.stamp.sec + 1e-9 * m.transforms[0].header.stamp.nanosec for m in out.tf]
     # decimated to publish_rate (100 Hz of simulated time): stamps are steps of the run, in order
     assert stamps == sorted(stamps) and 0.0 < max(stamps) <= 30 * model.scene.solver.dt + 1e-12, stamps
+
+
+def test_cmake_refuses_to_hide_ros2s_tf2_msgs(tmp_path):
+    """With ROS 2's own tf2_msgs on AMENT_PREFIX_PATH, configuring ros/tf2_msgs stops and says what to do."""
+    import os
+    import shutil
+
+    if shutil.which("cmake") is None:
+        pytest.skip("cmake not installed")
+    underlay = tmp_path / "opt_ros"
+    (underlay / "share" / "ament_index" / "resource_index" / "packages").mkdir(parents=True)
+    (underlay / "share" / "ament_index" / "resource_index" / "packages" / "tf2_msgs").touch()
+    env = dict(os.environ, AMENT_PREFIX_PATH=f"{underlay}{os.pathsep}{sys.prefix}")
+    proc = subprocess.run(["cmake", "-S", str(ROOT / "ros" / "tf2_msgs"), "-B", str(tmp_path / "build"), "-Wno-dev",
+                           f"-DCMAKE_INSTALL_PREFIX={tmp_path / 'install'}"], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode != 0
+    message = " ".join(proc.stderr.split())
+    assert f"ROS 2's own tf2_msgs is already installed in {underlay}" in message, proc.stderr[-2000:]
+    assert "build with `colcon build --packages-skip tf2_msgs`" in message
