@@ -103,7 +103,7 @@ def test_open_cylinder_pulled_out_converges_under_refinement():
         ua.append(out["A"][2])
         ub.append(out["B"][2])
         uc.append(-out["C"][1])
-    # measured (×1e-3, P/4 = 1): A 3.147, 4.306, 4.447 — errors 1.30, 0.14 against 6×6 (ratio 9.4)
+    # measured (×1e-3, P/4 = 1): A 3.183, 4.364, 4.507 — errors 1.32, 0.14 against 6×6 (ratio 9.3)
     _refines(ua, 4.0)
     _refines(ub, 4.0)
     _refines(uc, 4.0)
