@@ -52,7 +52,7 @@ def test_pinched_hemisphere_with_a_hole_converges_under_refinement():
         assert b[0] == 0.0                            # the symmetry edge x = 0 holds at B
         ua.append(a[0])
         ub.append(-b[1])
-    # measured (×1e-5, loads 0.01): A 0.5018, 0.8404, 0.9075 — errors 0.406, 0.067 against 8×8 (ratio 6.0)
+    # measured (×1e-3, loads 0.01): A 0.5018, 0.8404, 0.9075 — errors 0.406, 0.067 against 8×8 (ratio 6.0)
     _refines(ua, 4.0)
     _refines(ub, 4.0)
     # the loads are antisymmetric under a quarter turn: in the linear range |u_A| = |u_B| up to the
