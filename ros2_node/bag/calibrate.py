@@ -75,7 +75,7 @@ def _pose_topics(setup: TwinSetup, overrides) -> dict[str, str]:
     """Resolved pose topic → platform_pose output name."""
     twin = build_twin(setup, list(overrides))
     poses = [o for o in twin.scene.outputs if o.kind == "platform_pose"]
-    return {T.pose_topic(o.name, i).resolved(setup.node_name): o.name for i, o in enumerate(poses)}
+    return {T.pose_topic(o.name, i).resolved(setup.node_name, setup.namespace): o.name for i, o in enumerate(poses)}
 
 
 def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = None, until: float | None = None,
@@ -94,8 +94,8 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
     reader = BagReader(bag)
     setup = read_setup(reader, scene_path)
     overrides = tuple(overrides or ())
-    kinds = input_kinds(setup.node_name)
-    act_topic = T.ACTUATOR_STATES.resolved(setup.node_name)
+    kinds = input_kinds(setup.node_name, setup.namespace)
+    act_topic = T.ACTUATOR_STATES.resolved(setup.node_name, setup.namespace)
     poses = _pose_topics(setup, overrides)
     stop = None if until is None else int(round(until * 1e9))
     commands, rows = [], {}                       # rows: channel → (times, values, columns)

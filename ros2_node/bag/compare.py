@@ -108,8 +108,8 @@ class Comparison:
         self._pose(topic, "", rec.pose.position, rec.pose.orientation, p.position, p.orientation_wxyz,
                    p.name, t)
 
-    def tf(self, topic: str, rec, s: TwinSample, t: float) -> None:
-        by_name = {p.name: p for p in s.poses}
+    def tf(self, topic: str, rec, s: TwinSample, t: float, frame_prefix: str = "") -> None:
+        by_name = {frame_prefix + p.name: p for p in s.poses}
         for tr in rec.transforms:
             p = by_name.get(tr.child_frame_id)
             if p is None:

@@ -32,10 +32,10 @@ class LockstepResult:
     t_end: float = 0.0
 
 
-def input_kinds(node_name: str) -> dict[str, str]:
-    """Resolved command topic → the ``topic_kind`` of :func:`ros2_node.twin.apply_message`."""
-    return {T.COMMANDS.resolved(node_name): "commands", T.ACTUATOR_COMMANDS.resolved(node_name): "actuator_commands",
-            T.TRAJECTORY.resolved(node_name): "joint_trajectory", T.JOINT_COMMANDS.resolved(node_name): "joint_commands"}
+def input_kinds(node_name: str, namespace: str = "/") -> dict[str, str]:
+    """Resolved command topic (of a node ``node_name`` in ``namespace``) → the ``topic_kind`` of
+    :func:`ros2_node.twin.apply_message`."""
+    return {T.Topic(name, "", "in", "").resolved(node_name, namespace): kind for name, kind in T.KINDS.items()}
 
 
 def ns(t: float) -> int:

@@ -57,6 +57,8 @@ class Twin:
     until: float | None            # offline runs: where the last step lands
     scene_sha256: str
     scene_source: str
+    namespace: str = "/"
+    frame_prefix: str = ""
 
 
 @dataclass(frozen=True)
@@ -70,6 +72,8 @@ class TwinSetup:
     runner_options: dict
     node_name: str
     until: float | None            # offline runs: where the last step lands
+    namespace: str = "/"           # the recording node's namespace (its topics resolve under it)
+    frame_prefix: str = ""         # prepended to the platforms' tf child frames
 
 
 def read_setup(reader: BagReader, scene_path: str | None = None) -> TwinSetup:
@@ -96,8 +100,13 @@ def read_setup(reader: BagReader, scene_path: str | None = None) -> TwinSetup:
     if not solver:                              # older bags / other writers: the scalar keys
         solver = {k: json.loads(reader.setting(k)) if k == "dt" else reader.setting(k)
                   for k in ("dt", "integrator") if reader.setting(k) is not None}
+    try:
+        frames = reader.setting("frames", {}, as_json=True) or {}
+    except json.JSONDecodeError:
+        frames = {}
     return TwinSetup(text, source, solver, opts, reader.setting("node_name") or T.DEFAULT_NODE_NAME,
-                     float(until) if until is not None else None)
+                     float(until) if until is not None else None, reader.setting("node_namespace") or "/",
+                     str(frames.get("prefix", "")) if isinstance(frames, dict) else "")
 
 
 def load_twin(reader: BagReader, scene_path: str | None = None, overrides: list[str] | None = None) -> Twin:
@@ -166,7 +175,7 @@ def build_twin(setup: TwinSetup, overrides: list[str] | None = None, *, where: s
     options = RunnerOptions(**{k: (float(v) if isinstance(fields[k].default, float) and isinstance(v, int)
                                    and not isinstance(v, bool) else v) for k, v in opts.items()})
     return Twin(scene, compile_scene(scene), options, setup.node_name, setup.until,
-                scene_sha256(setup.scene_text), setup.scene_source)
+                scene_sha256(setup.scene_text), setup.scene_source, setup.namespace, setup.frame_prefix)
 
 
 @dataclass
@@ -295,8 +304,8 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
     runner = TwinRunner(twin.model, options=twin.options)
     if runner.sim.spec.analysis != "dynamic":
         raise ReplayError(f"{bag}: scene analysis '{runner.sim.spec.analysis}' cannot be replayed")
-    kinds = input_kinds(twin.node_name)
-    pose_index = {T.pose_topic(o.name, i).resolved(twin.node_name): i
+    kinds = input_kinds(twin.node_name, twin.namespace)
+    pose_index = {T.pose_topic(o.name, i).resolved(twin.node_name, twin.namespace): i
                   for i, o in enumerate(o for o in twin.scene.outputs if o.kind == "platform_pose")}
 
     commands: list[tuple[int, str, str, Any]] = []
@@ -334,7 +343,7 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
                     cmp.mismatch(f"{topic}: no platform_pose output of the replayed scene publishes here "
                                  f"(expected one of {sorted(pose_index)})")
             elif typ == "tf2_msgs/msg/TFMessage":
-                cmp.tf(topic, rec, s, t)
+                cmp.tf(topic, rec, s, t, twin.frame_prefix)
             elif typ == "visualization_msgs/msg/MarkerArray":
                 cmp.shape(topic, rec, s, t, runner.shells)
             elif typ == "flexmb_msgs/msg/TwinStatus":

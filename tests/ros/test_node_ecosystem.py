@@ -249,6 +249,12 @@ def test_two_namespaced_twins_run_side_by_side_without_crosstalk(tmp_path, dds_e
     tf = [m.decode() for m in reader.messages({"/tf"})]
     assert tf and {t.child_frame_id for m in tf for t in m.transforms} == {"robot1/platform"}
     assert {t.header.frame_id for m in tf for t in m.transforms} == {"world"}
+    # and it replays offline: the namespace and the frame prefix come from the bag's settings
+    from ros2_node.bag.replay import replay
+
+    rep = replay(bag)
+    assert rep.ok and rep.samples_compared > 0 and rep.commands_applied == count["robot1"], rep.format()
+    assert any(f.topic == "/tf" for f in rep.fields), rep.format()
 
 
 def _lifecycle(client, name: str, transition: str, *nodes):
