@@ -1,6 +1,7 @@
 """ament_python build of the flexmb twin for colcon (``colcon build`` in a ROS 2 workspace).
 
-The Python sources are the repository's own ``flexmb_core`` and ``ros2_node`` (two directories up);
+The Python sources are the repository's own ``flexmb_core`` and ``ros2_node``, symlinked into this
+directory (so ``colcon build --symlink-install``, i.e. ``setup.py develop``, works too);
 ``pip install -e .`` at the repository root (``pyproject.toml``) installs the same packages for a
 venv. This file only adds what ``ros2 run`` and ``ros2 launch`` need:
 
@@ -58,8 +59,9 @@ setup(
     version=_version(),
     description="flexmb: a real-time flexible digital twin of actuated spatial mechanisms as a ROS 2 node",
     license="Apache-2.0",
-    package_dir={"": os.path.relpath(REPO)},
-    packages=find_packages(where=str(REPO), include=[f"{p}*" for p in PY_PACKAGES]),
+    # flexmb_core and ros2_node here are symlinks to the repository's packages (setuptools' develop,
+    # i.e. colcon --symlink-install, refuses packages outside the setup directory)
+    packages=find_packages(where=str(HERE), include=[f"{p}*" for p in PY_PACKAGES]),
     package_data=_package_data(),
     data_files=[
         ("share/ament_index/resource_index/packages", _relative([HERE / "resource" / PACKAGE])),

@@ -12,7 +12,7 @@ environment of the workspace's ``install/setup.bash``:
   answers commands over DDS, publishes ``/tf``, and imports the workspace's packages, not the venv's.
 
 The numba kernels compile cold (the install is a new source path): the twin's start takes most of
-this test's time.
+this test's time. A second, quick build of the node package alone checks ``--symlink-install``.
 """
 
 from __future__ import annotations
@@ -144,3 +144,22 @@ def test_ros2_run_twin_from_the_launch_file_answers_commands(workspace, tmp_path
     assert list(last.commanded_lengths) == pytest.approx([float(x) + 2e-4 for x in model.actuators.l0], abs=1e-12)
     assert out.tf_publishers == [("tf2_msgs/msg/TFMessage", standard_tfmessage_hash())]
     assert out.tf and all(len(m.transforms) >= 1 for m in out.tf)
+
+
+def test_symlink_install_of_the_node_package(tmp_path):
+    """``colcon build --symlink-install`` (setup.py develop): the executables run the repository's sources."""
+    if not COLCON.exists():
+        pytest.skip("colcon not installed (pip install -e '.[ros-build]')")
+    env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV), PATH=f"{VENV / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
+    proc = subprocess.run([str(COLCON), "--log-base", str(tmp_path / "log"), "build", "--symlink-install",
+                           "--build-base", str(tmp_path / "build"), "--install-base", str(tmp_path / "install"),
+                           "--paths", str(PACKAGES["flexmb"])], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+    run_env = _sourced_env(tmp_path / "install" / "setup.bash", dict(os.environ))
+    where = subprocess.run([sys.executable, "-c", "import ros2_node, os; print(os.path.realpath(ros2_node.__file__))"],
+                           env=run_env, cwd="/", capture_output=True, text=True, check=True, timeout=120).stdout.strip()
+    assert where == str(ROOT / "ros2_node" / "__init__.py")
+    exe = tmp_path / "install" / "flexmb" / "lib" / "flexmb" / "flexmb_node"
+    usage = subprocess.run([str(exe), "--help"], env=run_env, capture_output=True, text=True, timeout=120)
+    assert usage.returncode == 0 and usage.stdout.startswith("usage: flexmb node"), usage.stderr[-2000:]
