@@ -178,7 +178,7 @@ def main() -> None:
         top, bot = r["limit_points"][:2]
         lines.append(f"| {name} | {st} | {it} | {wl:.2f} | {top['load_factor']:.6f}, {top['displacement']:.5f} | "
                      f"{bot['load_factor']:.6f}, {bot['displacement']:.5f} |")
-    lines += ["", f"Load stepping (Δλ = 0.03 to 0.6, allowed to snap): " + "; ".join(
+    lines += ["", "Load stepping (Δλ = 0.03 to 0.6, allowed to snap): " + "; ".join(
         f"step {s['step']} ({s['kind']}, w {s['displacement_before']:.4f} → {s['displacement']:.4f} m, "
         f"{s['jump_ratio']:.1f}× the tangent prediction)" for s in snaps_a)
         + f"; {load_iters_a} Newton iterations. Without `allow_snap_through` `flexmb run` exits 2 there.", ""]

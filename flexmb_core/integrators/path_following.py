@@ -43,7 +43,7 @@ from ..errors import ConvergenceError, SceneError
 from ..kernels.moments import conservative_moments, follower_moments
 from ..model.assembly import apply_drives, assemble
 from ..model.model import Model
-from ..scene.schema import DofComponent, PathStepSpec, Scene, SolverSpec
+from ..scene.schema import DofComponent, PathStepSpec, Scene
 from ..solvers.result import StepResult
 from .critical import PathPoint, TangentLU, classify
 from .energy import energies
