@@ -30,7 +30,7 @@ from flexmb_core.errors import FlexmbError
 from . import topics as T
 
 _INPUT_SUFFIXES = {"commands": T.COMMANDS, "actuator_commands": T.ACTUATOR_COMMANDS,
-                   "joint_trajectory": T.TRAJECTORY}
+                   "joint_trajectory": T.TRAJECTORY, "joint_commands": T.JOINT_COMMANDS}
 _OUTPUTS = (T.JOINT_STATES, T.ACTUATOR_STATES, T.STATUS, T.TF)
 # status fields that depend on the wall clock or on how often the node published
 _VOLATILE = ("step_wall_time", "real_time_factor", "command_latency", "command_age", "deadline_misses", "steps",
@@ -138,6 +138,9 @@ def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1
     if scene_text is None:
         raise FlexmbError(f"{bag}: no scene.yaml attachment; cannot rebuild the twin")
     node_name = old.setting("node_name", T.DEFAULT_NODE_NAME)
+    if (old.setting("node_namespace") or "/") != "/":
+        raise FlexmbError(f"{bag}: recorded in the namespace {old.setting('node_namespace')}; replay-live takes bags "
+                          "of the root namespace (flexmb replay takes any)")
     dt = float(old.setting("dt"))
     integrator = old.setting("integrator")
     inputs = {t.resolved(node_name): t for t in _INPUT_SUFFIXES.values()}
