@@ -224,7 +224,9 @@ def _run_keys(spec, sim, path, error: str) -> dict:
         keys = path.report()
         keys["error"] = error
         return keys
-    snap = sim._static.snap.events if sim._static is not None and sim._static.snap is not None else []
+    monitor = sim._static.snap if sim._static is not None else None
+    snap = monitor.events if monitor is not None else []
+    bifurcations = monitor.bifurcations if monitor is not None else []
     if snap and not spec.allow_snap_through and not error:
         first = snap[0]
         error = (f"snap-through at load step {first['step']} (t = {first['t']:.6g}): {first['kind']} "
@@ -232,7 +234,8 @@ def _run_keys(spec, sim, path, error: str) -> dict:
                  f"moved {first['jump_ratio']:.3g}× its tangent prediction); load stepping cannot follow "
                  f"the path past a critical point: trace it with solver.control: arc_length, or allow "
                  f"the snap with solver.allow_snap_through: true")
-    return {"control": "load", "dt": spec.dt, "until": spec.until, "snap_through": snap, "error": error}
+    return {"control": "load", "dt": spec.dt, "until": spec.until, "snap_through": snap,
+            "bifurcations": bifurcations, "error": error}
 
 
 def _print_run(scene, summary: dict, warm: float, tracker) -> None:
@@ -249,6 +252,11 @@ def _print_run(scene, summary: dict, warm: float, tracker) -> None:
     for s in summary.get("snap_through", []):
         print(f"  snap-through at load step {s['step']} (t = {s['t']:.6g}): {s['kind']}, "
               f"displacement {s['displacement_before']} → {s['displacement']}")
+    if "limit_points" not in summary:
+        for b in summary.get("bifurcations", []):
+            print(f"  {b['kind']} (a bifurcation passed without a jump, the run stays on the fundamental branch) "
+                  f"at load step {b['step']} (t = {b['t']:.6g}): negative pivots {b['negative_pivots'][0]} → "
+                  f"{b['negative_pivots'][1]}")
     for k, v in summary["outputs"].items():
         print(f"  {k}: {_brief(v)}")
     if tracker.active:

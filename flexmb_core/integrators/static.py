@@ -4,19 +4,19 @@ Every quantity that depends on time (load signals, actuator commands) is evaluat
 pseudo-time of the increment, so a static run is a sequence of equilibria t_k = k·T/N.
 
 Load stepping cannot pass a limit point: past it the equilibrium it converges to (if any) lies on
-another branch. :class:`SnapThroughMonitor` reports such a step, a **snap-through**, when
+another branch. :class:`SnapThroughMonitor` reports such a step, a **snap-through**, when the step
+**jumped**: its converged increment of the free nodal positions is more than :data:`JUMP_RATIO`
+times the first Newton increment, the tangent's linear prediction of the same load increment. On a
+smooth path the two agree to first order in the step (ratios 0.8–1.2 measured on the shipped static
+scenes and on Lee's frame before its limit point), while a jump to a distant branch is several
+times longer (Lee's frame 3.8–12×, the shallow arch 23×). A jump whose step also changed the
+number of negative pivots of the tangent (a critical point was passed,
+:mod:`flexmb_core.integrators.critical`) is a ``critical_point+jump``.
 
-- the number of negative pivots of the tangent changed between the step's start and its converged
-  state (a critical point was passed, :mod:`flexmb_core.integrators.critical`), or
-- the step **jumped**: its converged increment of the free nodal positions is more than
-  :data:`JUMP_RATIO` times the first Newton increment, the tangent's linear prediction of the same
-  load increment. On a smooth path the two agree to first order in the step (ratios 0.8–1.2
-  measured on the shipped static scenes and on Lee's frame before its limit point), while a jump
-  to a distant branch is several times longer (Lee's frame 3.8–12×, the shallow arch 23×).
-
-A load-stepping run that passes a bifurcation stays on the (now unstable) fundamental branch
-without jumping; the pivot count still reports it: e.g. ``scenes/shell_roll_up.yaml`` loses
-stability out of its plane (a lateral mode of the rolled strip) between M/M_max = 0.75 and 0.875.
+A step that changes the pivot count *without* jumping passed a **bifurcation** and stayed on the
+(now unstable) fundamental branch: that is reported among the bifurcations, not as a snap-through
+(the run did not change branch): e.g. ``scenes/shell_roll_up.yaml`` loses stability out of its
+plane (a lateral mode of the rolled strip) between M/M_max = 0.75 and 0.875.
 
 Path following through limit points and snap-backs: :mod:`flexmb_core.integrators.path_following`.
 """
@@ -51,8 +51,10 @@ class SnapThroughMonitor:
     ----------
     events : list[dict] — one per snap-through: ``step``, ``t`` (pseudo-time), ``displacement``
         and ``displacement_before`` (the ``solver.monitor`` component, m; None without one),
-        ``kind`` (``critical_point`` | ``jump`` | ``critical_point+jump``), ``negative_pivots``
-        [before, after] and ``jump_ratio``.
+        ``kind`` (``jump`` | ``critical_point+jump``), ``negative_pivots`` [before, after] and
+        ``jump_ratio``.
+    bifurcations : list[dict] — one per critical point passed without a jump, the same keys, and
+        ``kind`` ``stability_loss`` (more negative pivots) or ``stability_gain``.
     """
 
     def __init__(self, model: Model, spec: SolverSpec):
@@ -61,6 +63,7 @@ class SnapThroughMonitor:
         self.w = position_mask(model)[:model.nfree]
         self.monitor = dof_index(model, spec.monitor) if spec.monitor is not None else -1
         self.events: list[dict] = []
+        self.bifurcations: list[dict] = []
         self.steps = 0
         self._count: int | None = None
         self._u_prev = 0.0
@@ -76,16 +79,16 @@ class SnapThroughMonitor:
         free = self.model.free
         moved = float(np.linalg.norm((q[free] - q_start[free])[self.w]))
         ratio = moved / predicted if predicted > 0.0 else 0.0
-        kinds = []
-        if self.steps > 0 and count is not None and self._count is not None and count != self._count:
-            kinds.append("critical_point")
-        if self.steps > 0 and ratio > JUMP_RATIO:
-            kinds.append("jump")
-        u = self._u(q)
-        if kinds:
-            self.events.append({"step": self.steps, "t": t, "displacement_before": self._u(q_start),
-                                "displacement": u, "kind": "+".join(kinds),
-                                "negative_pivots": [self._count, count], "jump_ratio": ratio})
+        critical = self.steps > 0 and count is not None and self._count is not None and count != self._count
+        jump = self.steps > 0 and ratio > JUMP_RATIO
+        if critical or jump:
+            event = {"step": self.steps, "t": t, "displacement_before": self._u(q_start), "displacement": self._u(q),
+                     "negative_pivots": [self._count, count], "jump_ratio": ratio}
+            if jump:
+                self.events.append({**event, "kind": "critical_point+jump" if critical else "jump"})
+            else:
+                self.bifurcations.append({**event, "kind": "stability_loss" if count > self._count
+                                          else "stability_gain"})
         if count is not None:
             self._count = count
         self.steps += 1
