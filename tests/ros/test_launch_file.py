@@ -57,7 +57,7 @@ def test_executables_exist_and_import():
 
 def test_default_launch_starts_twin_and_player_with_declared_parameters():
     from ros2_node.params import SPECS
-    from ros2_node.topics import DEFAULT_NODE_NAME
+    from flexmb_io.topics import DEFAULT_NODE_NAME
 
     defaults, actions = evaluate(load_launch_file(LAUNCH), scene=SCENE)
     assert defaults["mode"] == "realtime" and defaults["play"] == "true" and defaults["namespace"] == ""
@@ -66,14 +66,14 @@ def test_default_launch_starts_twin_and_player_with_declared_parameters():
     assert set(nodes) <= set(_console_scripts())
     assert all(n.kwargs["package"] == "flexmb" for n in nodes.values())
     twin = nodes["flexmb_node"].kwargs
-    assert twin["name"] == DEFAULT_NODE_NAME and twin["namespace"] == ""
+    assert twin["name"] == DEFAULT_NODE_NAME and "namespace" not in twin
     params = {k: v for p in twin["parameters"] for k, v in p.items()}
     assert params == {"scene": SCENE, "mode": "realtime"}
     declared = {s.name: s for s in SPECS}
     assert set(params) <= set(declared)
     assert params["mode"] in declared["mode"].choices
     # the player's command line is one `flexmb play` accepts, aimed at the twin
-    from ros2_node.cli import build_parser
+    from flexmb.cli import build_parser
     args = build_parser().parse_args(["play", *nodes["flexmb_player"].kwargs["arguments"]])
     assert (args.scene, args.twin, args.mode, args.until) == (SCENE, DEFAULT_NODE_NAME, "realtime", 20.0)
     assert not any(a.kind == "RegisterEventHandler" for a in actions)
@@ -86,7 +86,7 @@ def test_namespace_record_and_stop_after_play():
     twin = nodes["flexmb_node"].kwargs
     assert twin["namespace"] == "robot1"
     assert twin["parameters"] == [{"scene": SCENE, "mode": "lockstep", "record": "/tmp/bag"}]
-    from ros2_node.cli import build_parser
+    from flexmb.cli import build_parser
     args = build_parser().parse_args(["play", *nodes["flexmb_player"].kwargs["arguments"]])
     assert (args.twin, args.mode, args.until) == ("robot1/flexmb_twin", "lockstep", 0.5)
     [handler] = [a for a in actions if a.kind == "RegisterEventHandler"]

@@ -57,8 +57,9 @@ def twin_and_player(context, *args, **kwargs):
     parameters = {"scene": scene, "mode": arg["mode"]}
     if arg["record"]:
         parameters["record"] = arg["record"]
-    twin = Node(package=PACKAGE, executable="flexmb_node", name=TWIN_NAME, namespace=namespace,
-                parameters=[parameters], output="screen", emulate_tty=True)
+    where = {"namespace": namespace} if namespace else {}       # none given: the launch's own namespace
+    twin = Node(package=PACKAGE, executable="flexmb_node", name=TWIN_NAME, parameters=[parameters],
+                output="screen", emulate_tty=True, **where)
     actions = [twin]
     if _flag(arg["play"], "play"):
         # the player names the twin by its fully qualified name; its private topics live under it
