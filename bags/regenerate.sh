@@ -6,4 +6,4 @@ set -e
 cd "$(dirname "$0")/.."
 export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 export NUMBA_CACHE_DIR="${NUMBA_CACHE_DIR:-$PWD/.cache/numba}"
-exec "${PYTHON:-.venv/bin/python}" -m ros2_node.cli bag regenerate --dir bags "$@"
+exec "${PYTHON:-.venv/bin/python}" -m flexmb.cli bag regenerate --dir bags "$@"

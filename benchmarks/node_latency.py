@@ -57,7 +57,7 @@ def run_pingpong(seconds: float, rate: float) -> dict:
     echo = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "dds_echo.py"), "--seconds",
                              str(seconds + 60)], env=env, cwd=ROOT)
     try:
-        p = subprocess.run([sys.executable, "-m", "ros2_node.cli", "play", CASES["bars"][0], "--mode", "realtime",
+        p = subprocess.run([sys.executable, "-m", "flexmb.cli", "play", CASES["bars"][0], "--mode", "realtime",
                             "--until", str(seconds), "--json", str(out), "--quiet", "--timeout", "60", "--rate",
                             str(rate)],
                            env=env, cwd=ROOT, capture_output=True, text=True)
@@ -75,7 +75,7 @@ def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float) ->
     """``flexmb demo`` of one case: the node's and the player's summaries, flattened."""
     scene, what = CASES[name]
     out = ROOT / "build" / "bench_node" / name
-    cmd = [sys.executable, "-m", "ros2_node.cli", "demo", scene, "--mode", "realtime", "--until", str(seconds),
+    cmd = [sys.executable, "-m", "flexmb.cli", "demo", scene, "--mode", "realtime", "--until", str(seconds),
            "--out", str(out), "--rate", str(rate)]
     if rt_priority is not None:
         cmd += ["--rt-priority", str(rt_priority)]

@@ -1,6 +1,7 @@
 """flexmb_core — total-Lagrangian positional FEM for flexible spatial mechanisms.
 
-The core never imports ROS or rerun; adapters in ``ros2_node`` and ``flexmb_core.io`` do.
+The core never imports ROS, rerun, mcap or ``benchmarks/``; the adapters in ``flexmb_io`` (recordings,
+rerun, the twin runner; no rclpy) and ``ros2_node`` (rclpy) do (``tests/unit/test_layers.py``).
 """
 
 __version__ = "0.1.0"

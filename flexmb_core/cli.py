@@ -9,8 +9,6 @@ Verbs:
                                           offline simulation; JSON summary of speed, solver
                                           health and the final values of the scene's outputs
   flexmb commands stewart --out CSV       the Stewart appendix leg-length commands (Eqs. 52–60)
-  flexmb bench [--case b1|spin_up|stewart|all] [--quick] [--out DIR]
-                                          work-precision reports (source checkout, extra [bench])
   flexmb tune SCENE --tol TOL [--until T] [--out DIR] [--scheduler ADDRESS] [--workers N]
                                           cheapest fidelity whose outputs stay within TOL of a
                                           converged reference; writes the tuned scene and its table;
@@ -289,28 +287,6 @@ def cmd_commands(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench_cli():
-    """``benchmarks/workprecision/cli.py`` of the source checkout, or None (an installed wheel has
-    no ``benchmarks/``). Its module import is cheap; the benchmark code loads in ``run``."""
-    root = Path(__file__).resolve().parents[1]
-    if not (root / "benchmarks" / "workprecision" / "cli.py").is_file():
-        return None
-    if str(root) not in sys.path:
-        sys.path.append(str(root))
-    from benchmarks.workprecision import cli
-    return cli
-
-
-def cmd_bench(args: argparse.Namespace) -> int:
-    bench = _bench_cli()
-    if bench is None:
-        print("flexmb bench: needs a source checkout: benchmarks/workprecision/ was not found next to "
-              f"{Path(__file__).resolve().parent} (install flexmb editable from the repository, extra [bench])",
-              file=sys.stderr)
-        return 1
-    return bench.run(args)
-
-
 def cmd_tune(args: argparse.Namespace) -> int:
     import yaml
 
@@ -465,15 +441,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="continuity of the blends: C² (quintic), C³, C⁴ (nonic)")
     cm.set_defaults(func=cmd_commands)
 
-    bench = _bench_cli()
-    bn = sub.add_parser("bench", help="work-precision reports: error against wall time per simulated second "
-                                      "(B1, spin-up, Stewart; peers when installed)",
-                        description=bench.__doc__ if bench else None,
-                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    if bench is not None:
-        bench.add_arguments(bn)
-    bn.set_defaults(func=cmd_bench)
-
     tn = sub.add_parser("tune", help="cheapest fidelity whose outputs stay within a tolerance of a converged "
                                      "reference (model only what a scene needs)")
     tn.add_argument("scene")
@@ -513,9 +480,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", default="build/sweep", help="directory: runs/, scenes/, sweep.csv/.parquet/.png/.json")
     sw.add_argument("--quiet", action="store_true", help="no progress bar, no console summary")
     sw.set_defaults(func=cmd_sweep)
-    # Where the application layer (ros2_node.cli) adds its verbs and its options to `run`.
+    # Where the application layer (flexmb.cli) adds its verbs (node, replay, view, bench, ...) and its
+    # options to `run`.
     p.verbs = sub
-    p.verb_parsers = {"check": c, "run": r, "commands": cm, "bench": bn, "tune": tn, "sweep": sw}
+    p.verb_parsers = {"check": c, "run": r, "commands": cm, "tune": tn, "sweep": sw}
     return p
 
 

@@ -2,7 +2,7 @@
 
 The ROS node, the MCAP recorder, ``flexmb run --mcap`` and ``flexmb replay`` all read the solver
 through this one place, so a live run and an offline run of the same commands report the same
-numbers. It is pure NumPy (no ROS): the adapters in ``ros2_node`` turn a sample into messages.
+numbers. It is pure NumPy (no ROS): the adapters in ``flexmb_io`` and ``ros2_node`` turn a sample into messages.
 
 What is reported is what the scene declares ("model only what a scene needs"):
 

@@ -1,6 +1,6 @@
 """External actuator commands: validation and evaluation in simulated time (no ROS).
 
-Three input forms, one per topic of the node (see :mod:`ros2_node.topics`):
+Three input forms, one per topic of the node (see :mod:`flexmb_io.topics`):
 
 - an array of lengths in scene order (``Float64MultiArray``: no stamp, applies from reception);
 - named lengths with optional rates, stamped (``ActuatorCommand``);

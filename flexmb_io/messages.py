@@ -104,8 +104,8 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: Sh
     TRIANGLE_LIST per shell (ns = name, id = position in the array).
 
     ``shells`` must have been read at the sample's state (:meth:`ShellShapes.read`, which
-    :meth:`ros2_node.twin.TwinRunner.sample` does); a shell's marker lists 3 points per flat
-    triangle (:func:`ros2_node.shells.shell_triangles`: 9 per cubic element), all in the marker's
+    :meth:`flexmb_io.twin.TwinRunner.sample` does); a shell's marker lists 3 points per flat
+    triangle (:func:`flexmb_io.shells.shell_triangles`: 9 per cubic element), all in the marker's
     colour, with unit scale (RViz scales triangle-list points by it).
     """
     markers = []

@@ -1,6 +1,6 @@
 """The twin's time loop on a thread of its own (no ROS here: the node wires it to rclpy).
 
-:class:`Stepper` keeps the :class:`~ros2_node.twin.TwinRunner`'s time: its thread runs the steps
+:class:`Stepper` keeps the :class:`~flexmb_io.twin.TwinRunner`'s time: its thread runs the steps
 no command asked for, calling the numba step (which releases the GIL, so the executor and the
 publisher run meanwhile), and copies what the publisher needs into a preallocated ring of
 :class:`Snapshot` slots. Nothing in the loop builds a message or writes a file; the publisher

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 DEFAULT_NODE_NAME = "flexmb_twin"
 WORLD_FRAME = "world"
 
-# input topic → the ``topic_kind`` of :func:`ros2_node.twin.apply_message`
+# input topic → the ``topic_kind`` of :func:`flexmb_io.twin.apply_message`
 KINDS = {"~/commands": "commands", "~/actuator_commands": "actuator_commands",
          "~/joint_trajectory": "joint_trajectory", "~/joint_commands": "joint_commands"}
 

@@ -36,7 +36,7 @@ class RunnerOptions:
     ramp_time: float = 2.0                # s
     stale_after: float = 1.0              # s
     max_lead: float = 1.0                 # s
-    command_hold: str = "smooth"          # smooth (C¹) | ramp (linear) | step: see ros2_node.commands
+    command_hold: str = "smooth"          # smooth (C¹) | ramp (linear) | step: see flexmb_io.commands
     max_command_rate: float = 10.0        # m/s, commanded rates beyond are rejected (actuators without a servo)
     max_trajectory_points: int = 10000    # longer trajectories are rejected
     # JointState commands (~/joint_commands): False applies them on arrival (their stamp ignored, as

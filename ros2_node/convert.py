@@ -1,4 +1,4 @@
-"""Plain dicts (:mod:`ros2_node.messages`) ↔ rclpy messages, by the messages' own introspection.
+"""Plain dicts (:mod:`flexmb_io.messages`) ↔ rclpy messages, by the messages' own introspection.
 
 Only the live node uses this (it imports rclpy-generated classes lazily, by type name).
 """

@@ -2,17 +2,17 @@
 
 The generic dict → message conversion (:func:`ros2_node.convert.to_ros`) costs ~80 µs a message,
 too much inside a 1 ms step; these fillers cost a few µs. They must say exactly what
-:mod:`ros2_node.messages` says (the recordings use those dicts): a test compares the two field by
+:mod:`flexmb_io.messages` says (the recordings use those dicts): a test compares the two field by
 field.
 """
 
 from __future__ import annotations
 
 from flexmb_core.report import TwinSample
+from flexmb_io import messages as M
+from flexmb_io.shells import ShellShapes
 
-from . import messages as M
 from .convert import message_class
-from .shells import ShellShapes
 
 
 def _set_stamp(stamp, t: float) -> None:
@@ -119,7 +119,7 @@ class LiveMessages:
         return m
 
     def make_shape(self, s: TwinSample, member_kinds, shells: ShellShapes | None = None) -> None:
-        """The MarkerArray of :func:`ros2_node.messages.shape`, built once: every marker and point
+        """The MarkerArray of :func:`flexmb_io.messages.shape`, built once: every marker and point
         object exists from here on and :meth:`fill_shape` only writes numbers into them."""
         MarkerArray = message_class("visualization_msgs/msg/MarkerArray")
         Marker = message_class("visualization_msgs/msg/Marker")
@@ -143,7 +143,7 @@ class LiveMessages:
 
     def fill_shape(self, s: TwinSample, member_kinds, shells: ShellShapes | None = None):
         """``~/shape`` at the sample's state (``shells`` read at the same state, as for
-        :func:`ros2_node.messages.shape`)."""
+        :func:`flexmb_io.messages.shape`)."""
         if not hasattr(self, "shape_msg"):
             self.make_shape(s, member_kinds, shells)
         for mk, pts in zip(self._member_markers, s.member_points):

@@ -26,8 +26,8 @@ from collections import defaultdict
 from pathlib import Path
 
 from flexmb_core.errors import FlexmbError
-
-from . import topics as T
+from flexmb_io import topics as T
+from flexmb_io.bag.reader import obj_to_dict
 
 _INPUT_SUFFIXES = {"commands": T.COMMANDS, "actuator_commands": T.ACTUATOR_COMMANDS,
                    "joint_trajectory": T.TRAJECTORY, "joint_commands": T.JOINT_COMMANDS}
@@ -36,17 +36,6 @@ _OUTPUTS = (T.JOINT_STATES, T.ACTUATOR_STATES, T.STATUS, T.TF)
 _VOLATILE = ("step_wall_time", "real_time_factor", "command_latency", "command_age", "deadline_misses", "steps",
              "command_stamp",
              "message", "rejected_commands")
-
-
-def obj_to_dict(o):
-    """A decoded MCAP message (attribute object) as plain dicts/lists/numbers."""
-    if hasattr(o, "__slots__"):
-        return {k: obj_to_dict(getattr(o, k)) for k in o.__slots__ if not k.startswith("_")}
-    if isinstance(o, (list, tuple)):
-        return [obj_to_dict(v) for v in o]
-    if isinstance(o, (bytes, bytearray)):
-        return list(o)
-    return o
 
 
 def _leaves(d, prefix=""):
@@ -130,7 +119,7 @@ def compare_bags(old, new, node_name: str, *, abs_tol: float = 1e-9, rel_tol: fl
 
 
 def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1e-9, rel_tol: float = 1e-9) -> int:
-    from .bag.reader import BagReader
+    from flexmb_io.bag.reader import BagReader
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     old = BagReader(bag)
@@ -160,7 +149,7 @@ def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     env.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
     os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
-    node_cmd = [sys.executable, "-m", "ros2_node.cli", "node", str(scene_file), "--name", node_name, "--mode",
+    node_cmd = [sys.executable, "-m", "flexmb.cli", "node", str(scene_file), "--name", node_name, "--mode",
                 "lockstep", "--dt", repr(dt), "--publish-rate", repr(publish_rate), "--shape-rate", "0",
                 "--mcap", out, "--quiet"]
     if integrator:

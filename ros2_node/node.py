@@ -2,7 +2,7 @@
 
 Commands in (``~/commands``, ``~/actuator_commands``, ``~/joint_trajectory``, ``~/joint_commands``),
 the flexible mechanism out (``joint_states``, ``~/actuator_states``, ``~/platform_pose``, ``~/shape``,
-``~/status``, ``/clock``, ``/tf``, ``/diagnostics``); names and types in :mod:`ros2_node.topics`,
+``~/status``, ``/clock``, ``/tf``, ``/diagnostics``); names and types in :mod:`flexmb_io.topics`,
 resolved by rclpy (namespace, remapping; what the recordings store). A managed (lifecycle) node
 (configure = compile + warm-up, activate = step, deactivate = hold, cleanup) with the services
 ``~/reset``, ``~/pause``, ``~/resume`` and ``~/step`` (:class:`TwinNode`). QoS: outputs reliable,
@@ -10,7 +10,7 @@ command inputs best effort, both overridable per topic by ROS 2's ``qos_override
 
 Three threads, so that the time loop never waits for the interpreter's other work:
 
-- the **stepping thread** (:class:`~ros2_node.realtime.Stepper`) runs the numba step (GIL
+- the **stepping thread** (:class:`~flexmb_io.realtime.Stepper`) runs the numba step (GIL
   released) paced to absolute deadlines, and copies the state into a ring of preallocated
   snapshots;
 - the **executor** (the main thread, rclpy's C++ ``EventsExecutor``) validates and applies the
@@ -22,8 +22,8 @@ Three threads, so that the time loop never waits for the interpreter's other wor
 
 Timing. ``realtime``: the step to state n+1 must end by ``t_start + (n+1) Δt``; a waiting command
 starts its step at once, otherwise a step starts ``step_margin`` before its deadline (see
-:mod:`ros2_node.realtime`). ``lockstep``: one step per received command message, deterministic, so
-a lockstep run equals an offline replay of its commands (:mod:`ros2_node.bag`). Warm-up (numba
+:mod:`flexmb_io.realtime`). ``lockstep``: one step per received command message, deterministic, so
+a lockstep run equals an offline replay of its commands (:mod:`flexmb_io.bag`). Warm-up (numba
 compile or cache load) happens before the first step, outside the timed loop.
 """
 
@@ -45,15 +45,15 @@ from flexmb_core.model.compile import compile_scene
 from flexmb_core.model.workspace import Workspace
 from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
+from flexmb_io import messages as M
+from flexmb_io import topics as T
+from flexmb_io.realtime import Samples, Snapshot, Stepper, StepperConfig
+from flexmb_io.shells import ShellShapes
+from flexmb_io.twin import RunnerOptions, TwinRunner
 
-from . import messages as M
-from . import topics as T
 from .convert import message_class, to_dict
 from .live_messages import LiveMessages
 from .params import SPECS, NodeParams
-from .realtime import Samples, Snapshot, Stepper, StepperConfig
-from .shells import ShellShapes
-from .twin import RunnerOptions, TwinRunner
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
 _SWITCH_INTERVAL = 5.0e-5
@@ -254,10 +254,10 @@ class TwinNode:
 
         # -- recording and viewing ------------------------------------------------------------------
         if self.p.record:
-            from .bag.recorder import BagRecorder
+            from flexmb_io.bag.recorder import BagRecorder
             spec = self.runner.sim.spec
             n = self.node_name
-            # the same keys as an offline run's (ros2_node.bag.run_hook.run_settings), plus the node's
+            # the same keys as an offline run's (flexmb_io.bag.run_hook.run_settings), plus the node's
             settings = {"source": "flexmb node", "solver": dataclasses.asdict(spec),
                         "runner_options": dataclasses.asdict(options), "dt": repr(float(spec.dt)),
                         "integrator": spec.integrator, "tolerance": repr(float(spec.tolerance)),
@@ -269,7 +269,7 @@ class TwinNode:
             for topic in recorded:       # schemas and encoders now, not at a first message mid-loop
                 self.recorder.declare(self._resolved(topic), topic.type)
         if self.p.rrd:
-            from .viz.rerun_log import TwinRerunLogger
+            from flexmb_io.viz.rerun_log import TwinRerunLogger
             self.rerun = TwinRerunLogger(self.model, rrd_path=self.p.rrd)
             self.rerun.log_static()
 
@@ -440,7 +440,7 @@ class TwinNode:
 
     def _out(self, topic: T.Topic, fill, make_dict, t: float) -> None:
         """Publish ``fill()`` (a message filled by :class:`LiveMessages`, or None) when the topic has
-        subscribers, and record ``make_dict()`` (the same content, from :mod:`ros2_node.messages`)."""
+        subscribers, and record ``make_dict()`` (the same content, from :mod:`flexmb_io.messages`)."""
         pub = self._pub.get(topic.name)
         if pub is not None and self._live and self._listened.get(topic.name, True):
             msg = fill()

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import topics as T
+from flexmb_io import topics as T
 
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
@@ -85,7 +85,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f.unlink(missing_ok=True)
     if args.mcap and (Path(args.mcap) / "metadata.yaml").exists():
         shutil.rmtree(args.mcap)           # the previous demo's recording (a rosbag2 directory)
-    exe = [sys.executable, "-m", "ros2_node.cli"]
+    exe = [sys.executable, "-m", "flexmb.cli"]
     # the node runs until the player is done (it may start stepping before the player is up)
     node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--summary-json", str(node_json), "--quiet"]
     if args.publish_rate:

@@ -10,8 +10,7 @@ import math
 from dataclasses import dataclass, fields
 
 from flexmb_core.errors import FlexmbError
-
-from .topics import WORLD_FRAME
+from flexmb_io.topics import WORLD_FRAME
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from flexmb_core.errors import FlexmbError
+from flexmb_io import messages as M
+from flexmb_io import topics as T
 
-from . import messages as M
-from . import topics as T
 from .convert import message_class, to_ros
 
 

@@ -62,6 +62,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "from the source checkout)")
 
 
+def register(verbs, run_parser: argparse.ArgumentParser) -> None:
+    """Add ``flexmb bench`` to the ``flexmb`` command (``flexmb.cli`` calls it, as it calls the adapters';
+    ``flexmb_core`` never imports ``benchmarks/``)."""
+    bn = verbs.add_parser("bench", help="work-precision reports: error against wall time per simulated second "
+                                        "(B1, spin-up, Stewart; peers when installed)", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(bn)
+    bn.set_defaults(func=run)
+
+
 def _load() -> str:
     try:
         return f"{os.getloadavg()[0]:.1f}"

@@ -4,7 +4,7 @@ Jacobian's columns evaluated in parallel on Dask (the numerics of ``flexmb calib
 The model is a function ``residuals(theta) -> {channel: (m_c,) array}``: for parameter values
 ``theta`` (scene units), the simulated minus the measured values of every measured channel, in
 the channel's unit (m, N, rad, ...). It runs as a Dask task; this module only needs it picklable.
-The recording adapter (:mod:`ros2_node.bag.calibrate`) builds it from a bag.
+The recording adapter (:mod:`flexmb_io.bag.calibrate`) builds it from a bag.
 
 Method
 ------

@@ -89,7 +89,7 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
     ReplayError, flexmb_core.errors.SceneError
         When the bag has no usable scene or settings.
     """
-    from ..live_replay import obj_to_dict
+    from .reader import obj_to_dict
 
     reader = BagReader(bag)
     setup = read_setup(reader, scene_path)

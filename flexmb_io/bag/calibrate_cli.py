@@ -1,12 +1,11 @@
 """``flexmb calibrate``: the verb's flags, progress, report and files (the numerics:
-:mod:`flexmb_core.study.calibrate`; the bag side: :mod:`ros2_node.bag.calibrate`)."""
+:mod:`flexmb_core.study.calibrate`; the bag side: :mod:`flexmb_io.bag.calibrate`)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 
 DEFAULT_OUT = "build/calibrate"
@@ -175,8 +174,3 @@ def register(verbs) -> None:
     c.add_argument("--quiet", action="store_true", help="no line per twin run")
     c.set_defaults(func=cmd_calibrate)
 
-
-if __name__ == "__main__":          # pragma: no cover
-    from flexmb_core.cli import main
-
-    sys.exit(main(["calibrate", *sys.argv[1:]]))

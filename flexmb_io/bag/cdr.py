@@ -191,7 +191,7 @@ def compile_encoder(type_name: str, schema: str | None = None) -> Callable[[dict
     type_name
         The ROS type, ``pkg/msg/Type``.
     schema
-        Its ``ros2msg`` schema text (default: :func:`~ros2_node.bag.schemas.schema_text`).
+        Its ``ros2msg`` schema text (default: :func:`~flexmb_io.bag.schemas.schema_text`).
 
     Raises
     ------

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from flexmb_core.cli import add_run_hook
@@ -164,12 +163,3 @@ def register(verbs, run_parser: argparse.ArgumentParser) -> None:
     add_run_hook(run_parser, _make_hook)
     register_calibrate(verbs)
 
-
-def main(argv=None) -> int:          # pragma: no cover - convenience
-    from ..cli import main as app_main
-
-    return app_main(argv)
-
-
-if __name__ == "__main__":           # pragma: no cover
-    sys.exit(main())

@@ -1,5 +1,5 @@
 """A recording's commands through a twin in lockstep: the loop ``flexmb replay`` and ``flexmb
-calibrate`` share (:mod:`ros2_node.twin`'s timing rule).
+calibrate`` share (:mod:`flexmb_io.twin`'s timing rule).
 
 1. before the step from ``t_n``, apply every recorded command logged at ≤ ``t_n`` (ns), in file
    order;
@@ -34,7 +34,7 @@ class LockstepResult:
 
 def input_kinds(node_name: str, namespace: str = "/") -> dict[str, str]:
     """Resolved command topic (of a node ``node_name`` in ``namespace``) → the ``topic_kind`` of
-    :func:`ros2_node.twin.apply_message`."""
+    :func:`flexmb_io.twin.apply_message`."""
     return {T.Topic(name, "", "in", "").resolved(node_name, namespace): kind for name, kind in T.KINDS.items()}
 
 
@@ -49,7 +49,7 @@ def run_lockstep(runner, commands: list[tuple[int, str, str, Any]], *, last_ns: 
 
     Parameters
     ----------
-    runner : ros2_node.twin.TwinRunner
+    runner : flexmb_io.twin.TwinRunner
         A started runner (its initial state is time ``runner.t``).
     commands
         ``(log time ns, topic, topic kind, message)`` sorted by time (file order within one time);

@@ -26,6 +26,17 @@ from .writer import BagError, BagWriter
 MAGIC = b"\x89MCAP0\r\n"
 
 
+def obj_to_dict(o):
+    """A decoded MCAP message (attribute object) as plain dicts/lists/numbers."""
+    if hasattr(o, "__slots__"):
+        return {k: obj_to_dict(getattr(o, k)) for k in o.__slots__ if not k.startswith("_")}
+    if isinstance(o, (list, tuple)):
+        return [obj_to_dict(v) for v in o]
+    if isinstance(o, (bytes, bytearray)):
+        return list(o)
+    return o
+
+
 @dataclass
 class BagMessage:
     """One message: topic, ROS type, log time (ns of simulated time), CDR bytes; ``decode()``
@@ -185,7 +196,7 @@ class BagReader:
                 elif opcode == Opcode.FOOTER:
                     footer = True
                     if Footer.read(body).summary_start == 0:
-                        # the writer's provisional end (ros2_node.bag.writer): readable, but the
+                        # the writer's provisional end (flexmb_io.bag.writer): readable, but the
                         # recorder never closed the file
                         self._stop(pos, n, "a provisional footer without summary (the recorder was not closed)")
             except Exception as exc:            # a torn record whose length field survived

@@ -1,8 +1,8 @@
 """Record the twin to a rosbag2 directory with one ROS 2 MCAP file (no rclpy needed).
 
 ``flexmb node --mcap`` and ``flexmb run --mcap`` both write through :class:`BagRecorder`, with the
-topic names and types of :mod:`ros2_node.topics` and the message dicts of
-:mod:`ros2_node.messages`, so their bags are interchangeable. The bag runs on simulated time:
+topic names and types of :mod:`flexmb_io.topics` and the message dicts of
+:mod:`flexmb_io.messages`, so their bags are interchangeable. The bag runs on simulated time:
 every message's log time and publish time is the twin's simulated time in ns.
 
 Layout::
@@ -17,7 +17,7 @@ and inside the MCAP file, written first (so even a killed recording is self-desc
 - metadata record ``flexmb``: ``version`` (flexmb), ``scene`` (its name), ``scene_sha256`` (of the
   attached text), ``scene_file``, ``node_name``, ``recorder``, ``chunk_seconds``, ``created``
   (UTC wall clock) and the caller's ``settings``, every value a string (non-strings as JSON).
-  :mod:`ros2_node.bag.replay` reads ``solver`` (the effective ``SolverSpec`` as a JSON mapping),
+  :mod:`flexmb_io.bag.replay` reads ``solver`` (the effective ``SolverSpec`` as a JSON mapping),
   ``runner_options`` (``RunnerOptions`` as a JSON mapping) and, for offline runs, ``until``.
 """
 
@@ -118,7 +118,7 @@ class BagRecorder:
         self.path = self._bag.dir
         self.scene_sha256 = scene_sha256(scene_text)
         meta = {"version": flexmb_version(), "scene": name, "scene_sha256": self.scene_sha256,
-                "scene_file": str(scene_path), "node_name": node_name, "recorder": "ros2_node.bag.recorder",
+                "scene_file": str(scene_path), "node_name": node_name, "recorder": "flexmb_io.bag.recorder",
                 "chunk_seconds": repr(float(chunk_seconds)),
                 "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
         meta.update({str(k): setting_string(v) for k, v in settings.items()})
@@ -170,9 +170,9 @@ class BagRecorder:
         topic
             Resolved topic name (``/flexmb_twin/status``, ``/joint_states``, …).
         type_name
-            ROS type ``pkg/msg/Type`` (its schema must be known to :mod:`ros2_node.bag.schemas`).
+            ROS type ``pkg/msg/Type`` (its schema must be known to :mod:`flexmb_io.bag.schemas`).
         msg
-            The message as nested dicts/lists with the ROS field names (:mod:`ros2_node.messages`).
+            The message as nested dicts/lists with the ROS field names (:mod:`flexmb_io.messages`).
         t_sim
             Simulated time (s, ≥ 0): the message's log time and publish time, in ns.
 

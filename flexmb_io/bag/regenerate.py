@@ -67,7 +67,7 @@ def _command(name: str, entry: dict, out: Path) -> list[str]:
                           f"got {entry['command']!r}")
     k = argv.index("--mcap")
     argv[k + 1] = str(out)
-    return [sys.executable, "-m", "ros2_node.cli"] + argv[1:]
+    return [sys.executable, "-m", "flexmb.cli"] + argv[1:]
 
 
 def regenerate(bags_dir: Path, only: list[str] | None = None) -> int:

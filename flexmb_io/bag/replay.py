@@ -4,13 +4,13 @@ The twin is rebuilt from the bag alone: the scene attached as ``scene.yaml`` (or
 the solver settings of the ``flexmb`` metadata record (``solver``: the effective ``SolverSpec``,
 so ``--dt``/``--integrator`` given to the recorded run are honoured), the runner options
 (``runner_options``) and the node name. It then steps in lockstep with the recording
-(:mod:`ros2_node.twin`'s timing rule):
+(:mod:`flexmb_io.twin`'s timing rule):
 
 1. before the step from ``t_n``, apply every recorded command (``~/commands``,
    ``~/actuator_commands``, ``~/joint_trajectory``) logged at ≤ ``t_n`` (ns), in file order;
 2. step (an offline run's last step is shortened to land on its ``until``, as ``flexmb run`` does);
 3. compare every output recorded at the new time (same ns) with what the replay reports, field by
-   field (:mod:`ros2_node.bag.compare` lists the fields and the default tolerances).
+   field (:mod:`flexmb_io.bag.compare` lists the fields and the default tolerances).
 
 No ROS is needed. Exit codes of the verb: 0 every field within tolerance; 3 a field beyond its
 tolerance, a structural mismatch (names, sizes), a replay step that failed, or recorded outputs the
@@ -280,7 +280,7 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
     bag
         A rosbag2 directory or ``.mcap`` recorded by ``flexmb run --mcap`` or ``flexmb node --mcap``.
     tolerances
-        ``KEY=VALUE`` strings or a mapping (:mod:`ros2_node.bag.compare`); defaults otherwise.
+        ``KEY=VALUE`` strings or a mapping (:mod:`flexmb_io.bag.compare`); defaults otherwise.
     scene_path
         Replay against this scene file instead of the attached one.
     overrides

@@ -3,7 +3,7 @@
 DIR is a directory that is not itself a bag (``bags/``). A *bag* under it is a rosbag2 directory
 (it holds ``metadata.yaml`` or an ``.mcap`` file; it is not searched further) or an ``.mcap`` file
 outside such a directory, at any depth; its name is its path relative to DIR. Each bag is replayed
-by :func:`ros2_node.bag.replay.replay` exactly as ``flexmb replay BAG`` would — the same
+by :func:`flexmb_io.bag.replay.replay` exactly as ``flexmb replay BAG`` would — the same
 ``--scene``, ``--override`` and ``--tolerance`` for every bag — as a task of a Dask cluster
 (:func:`flexmb_core.study.cluster.connect`: a local cluster of ``--workers`` processes, default
 one per core, or ``--scheduler ADDRESS``); with one bag, or ``--workers 1``, the bags are

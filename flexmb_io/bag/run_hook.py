@@ -5,14 +5,14 @@ interchangeable) and is made for exact replay:
 
 - **input**, every step: ``/flexmb_twin/commands`` (``std_msgs/Float64MultiArray``) logged at the
   step's start ``t_n`` with the actuator lengths in force during ``t_n → t_n+1`` (the solver's
-  stretches × reference lengths), the twin's timing rule (:mod:`ros2_node.twin`);
+  stretches × reference lengths), the twin's timing rule (:mod:`flexmb_io.twin`);
 - **outputs**, at ``record_rate`` (default 100 Hz of simulated time) and always at the first and
   last state: ``/joint_states``, ``~/actuator_states``, ``~/platform_pose`` (one per
-  ``platform_pose`` output, :func:`ros2_node.topics.pose_topic`), ``/tf``, ``~/status``, ``/clock``;
+  ``platform_pose`` output, :func:`flexmb_io.topics.pose_topic`), ``/tf``, ``~/status``, ``/clock``;
   ``~/shape`` at most at ``shape_rate`` (20 Hz).
 
 Samples come from :class:`~flexmb_core.report.TwinReporter`, messages from
-:mod:`ros2_node.messages` — the node's code. SIGINT and SIGTERM are deferred to the end of the
+:mod:`flexmb_io.messages` — the node's code. SIGINT and SIGTERM are deferred to the end of the
 step being recorded, so the bag is closed complete (``flexmb run`` then exits 130).
 """
 
@@ -53,7 +53,7 @@ def exact_lengths(lam: np.ndarray, l0: np.ndarray, out: np.ndarray) -> np.ndarra
 
 def run_settings(scene, *, until: float, record_rate: float, shape_rate: float,
                  node_name: str = T.DEFAULT_NODE_NAME) -> dict:
-    """The ``flexmb`` metadata of an offline run (see :mod:`ros2_node.bag.recorder`)."""
+    """The ``flexmb`` metadata of an offline run (see :mod:`flexmb_io.bag.recorder`)."""
     from ..twin import RunnerOptions
 
     spec = scene.solver

@@ -7,7 +7,7 @@ rerun decode. The texts come from:
 1. ``msgs/msg`` of this repository for ``flexmb_msgs`` (the single source of truth), else the
    installed ``share/flexmb_msgs/msg``;
 2. ``msgdefs/<pkg>/msg/<Type>.msg`` next to this module: copies of the standard ROS 2 (Kilted)
-   definitions, so recording works without ROS installed. ``python -m ros2_node.bag.schemas
+   definitions, so recording works without ROS installed. ``python -m flexmb_io.bag.schemas
    --refresh PREFIX`` re-copies them from an ament prefix; a test checks they match the installed
    interface packages.
 """
@@ -29,7 +29,7 @@ SEPARATOR = "=" * 80
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
               "int32", "uint32", "int64", "uint64", "string", "wstring"}
 
-# The types the twin writes and reads (inputs and outputs, see ros2_node.topics).
+# The types the twin writes and reads (inputs and outputs, see flexmb_io.topics).
 RECORDED_TYPES = (
     "std_msgs/msg/Float64MultiArray", "flexmb_msgs/msg/ActuatorCommand", "trajectory_msgs/msg/JointTrajectory",
     "sensor_msgs/msg/JointState", "flexmb_msgs/msg/ActuatorState", "geometry_msgs/msg/PoseStamped",

@@ -1,13 +1,13 @@
 """A rosbag2 directory holding one chunked, compressed ROS 2 MCAP file (already-encoded messages).
 
-:class:`BagWriter` owns the file layout and crash safety; :class:`~ros2_node.bag.recorder.BagRecorder`
-(messages as dicts) and :func:`~ros2_node.bag.reader.recover` (raw records) write through it.
+:class:`BagWriter` owns the file layout and crash safety; :class:`~flexmb_io.bag.recorder.BagRecorder`
+(messages as dicts) and :func:`~flexmb_io.bag.reader.recover` (raw records) write through it.
 
 Crash safety: a chunk is closed and the file flushed to the operating system every
 ``chunk_seconds`` of message time, every ``chunk_messages`` messages, or when the chunk exceeds
 ``chunk_bytes`` — whichever comes first — and ``metadata.yaml`` is then rewritten (at most once a
 second of wall time, at once when a topic was added) to describe what is on disk. A killed process therefore loses at most the open chunk; the data before it is
-complete records that :class:`~ros2_node.bag.reader.BagReader` reads and ``flexmb bag recover``
+complete records that :class:`~flexmb_io.bag.reader.BagReader` reads and ``flexmb bag recover``
 turns back into a complete bag. (Flushing reaches the kernel, which survives the process; it is
 not an ``fsync``, which only a power loss would need.)
 
@@ -159,7 +159,7 @@ class BagWriter:
         # message indexes are kept (rosbags finds messages through them) although writing them is
         # most of a chunk flush's cost
         self._mcap = Writer(self._stream, chunk_size=int(chunk_bytes), compression=_compression(compression))
-        self._mcap.start(profile="ros2", library="flexmb/ros2_node.bag")
+        self._mcap.start(profile="ros2", library="flexmb/flexmb_io.bag")
         self._stream.commit(self._tail)
         self.info = BagInfo(self.file_name, qos=qos or OfferedQos(), custom_data=dict(custom_data or {}))
         self._channels: dict[str, Channel] = {}                # topic → channel
@@ -188,7 +188,7 @@ class BagWriter:
     # -- messages -------------------------------------------------------------------------------
     def channel(self, topic: str, type_name: str, schema: str | None = None) -> Channel:
         """The channel of ``topic`` (registered on first use with the ``ros2msg`` schema of
-        ``type_name``, by default the one of :func:`~ros2_node.bag.schemas.schema_text`).
+        ``type_name``, by default the one of :func:`~flexmb_io.bag.schemas.schema_text`).
 
         Raises
         ------

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# One palette for RViz markers (ros2_node.messages) and rerun, so a member looks the same in both.
+# One palette for RViz markers (flexmb_io.messages) and rerun, so a member looks the same in both.
 from ..messages import MEMBER_RGBA, SHELL_RGBA
 from ..shells import shell_triangles
 
@@ -37,7 +37,7 @@ class PlatformLayout:
 @dataclass
 class ShellLayout:
     """A shell: name, colour and, when a model says them, its flat triangles ``triangles (nt, 3)``
-    in mesh-node indices (:func:`ros2_node.shells.shell_triangles`) and ``first (N,)``: where each
+    in mesh-node indices (:func:`flexmb_io.shells.shell_triangles`) and ``first (N,)``: where each
     mesh node first appears in the triangle list ``triangles.ravel()``, i.e. in the points of the
     shell's TRIANGLE_LIST marker (so a recording's markers give back the node positions)."""
 

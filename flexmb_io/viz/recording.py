@@ -1,4 +1,4 @@
-"""Read a twin recording for viewing: :class:`ros2_node.bag.reader.BagReader` (rosbag2 directory
+"""Read a twin recording for viewing: :class:`flexmb_io.bag.reader.BagReader` (rosbag2 directory
 or bare ``.mcap``, decoded with the embedded ``ros2msg`` schemas, a file cut short read up to its
 last complete record) plus what the viewer needs on top: each message's header stamp.
 """

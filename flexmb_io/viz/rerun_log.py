@@ -5,7 +5,7 @@ One logger serves a live node, ``flexmb run --rrd`` and ``flexmb view`` (a recor
 messages through the per-topic methods it is made of (:meth:`~TwinRerunLogger.log_members`,
 :meth:`~TwinRerunLogger.log_shells`, :meth:`~TwinRerunLogger.log_actuators`,
 :meth:`~TwinRerunLogger.log_pose`, ...), so both produce
-the same entities (see :mod:`ros2_node.viz.blueprint`) on the timeline ``sim_time``.
+the same entities (see :mod:`flexmb_io.viz.blueprint`) on the timeline ``sim_time``.
 
 Rows are buffered per entity and sent with ``send_columns`` every ``flush_rows`` rows: in rerun
 0.41 one ``log`` call costs 60 µs (scalars) to 240 µs (a line strip), a buffered row 7–30 µs, so
@@ -45,7 +45,7 @@ class TwinRerunLogger:
     ----------
     model
         A compiled :class:`~flexmb_core.model.model.Model`, a ready
-        :class:`~ros2_node.viz.layout.TwinLayout`, or None (names are learnt from what is logged).
+        :class:`~flexmb_io.viz.layout.TwinLayout`, or None (names are learnt from what is logged).
     rrd_path
         Write the recording to this ``.rrd`` file (``rr.save``-style sink); without it, attach a
         sink yourself through :attr:`recording` (``connect_grpc``, ``spawn``, ...).
@@ -116,7 +116,7 @@ class TwinRerunLogger:
 
         ``status`` adds what the sample does not know: ``step_wall_time`` (s), ``real_time_factor``
         and ``message`` (overrides the solver's), as in ``flexmb_msgs/TwinStatus``. ``shells``
-        (:class:`~ros2_node.shells.ShellShapes`, read at the sample's state) adds the shells.
+        (:class:`~flexmb_io.shells.ShellShapes`, read at the sample's state) adds the shells.
         """
         if not self._static_done:
             self.log_static()
@@ -171,7 +171,7 @@ class TwinRerunLogger:
             Shell ``names[k]``'s node positions (m) with ``triangles``; without them, a triangle
             list (3 points per triangle: a TRIANGLE_LIST marker's points).
         triangles : sequence of (nt_k, 3) int arrays, optional
-            Node indices of each flat triangle (:func:`ros2_node.shells.shell_triangles`).
+            Node indices of each flat triangle (:func:`flexmb_io.shells.shell_triangles`).
         colors : sequence of RGBA in [0, 1], optional
             Default: the layout's (the shell colour).
 

@@ -157,7 +157,7 @@ def screenshot(rrd: str | Path, png: str | Path, layout: TwinLayout | None = Non
 
 def _views_only(client, store, layout: TwinLayout | None) -> None:
     """Edit the recording's blueprint in the viewer: side, time and top panels out of the picture
-    and, with a layout, the 3D camera of :func:`~ros2_node.viz.blueprint.eye_controls` (so older
+    and, with a layout, the 3D camera of :func:`~flexmb_io.viz.blueprint.eye_controls` (so older
     recordings get it too). The file is not touched."""
     from .blueprint import WORLD, eye_pose
 

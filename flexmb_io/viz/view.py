@@ -1,4 +1,4 @@
-"""``flexmb view``: a recording → :class:`~ros2_node.viz.rerun_log.TwinRerunLogger`.
+"""``flexmb view``: a recording → :class:`~flexmb_io.viz.rerun_log.TwinRerunLogger`.
 
 Each recorded topic maps to one logger method, at the message's header stamp (simulated time):
 
@@ -31,7 +31,7 @@ from ..bag.recorder import METADATA_NAME
 from ..messages import MARKER_ADD, MARKER_LINE_STRIP, MARKER_TRIANGLE_LIST
 from .recording import Recording
 
-# message types by the topic contract (ros2_node.topics)
+# message types by the topic contract (flexmb_io.topics)
 T_JOINT_STATE = T.JOINT_STATES.type
 T_ACTUATOR_STATE = T.ACTUATOR_STATES.type
 T_POSE = T.PLATFORM_POSE.type
@@ -166,7 +166,7 @@ def view_recording(path, *, rrd_path: str | None = None, period: float = 0.0, re
     recording_id
         Passed to the logger (default: the recording's file name, so re-viewing replaces it).
     logger
-        An open :class:`~ros2_node.viz.rerun_log.TwinRerunLogger` to log into (not closed here).
+        An open :class:`~flexmb_io.viz.rerun_log.TwinRerunLogger` to log into (not closed here).
     """
     from .rerun_log import TwinRerunLogger
 

@@ -1,6 +1,7 @@
 """ament_python build of the flexmb twin for colcon (``colcon build`` in a ROS 2 workspace).
 
-The Python sources are the repository's own ``flexmb_core`` and ``ros2_node``, symlinked into this
+The Python sources are the repository's own ``flexmb_core``, ``flexmb_io``, ``ros2_node`` and ``flexmb``
+(the CLI), symlinked into this
 directory (so ``colcon build --symlink-install``, i.e. ``setup.py develop``, works too);
 ``pip install -e .`` at the repository root (``pyproject.toml``) installs the same packages for a
 venv. This file only adds what ``ros2 run`` and ``ros2 launch`` need:
@@ -26,7 +27,7 @@ from setuptools import find_packages, setup
 PACKAGE = "flexmb"
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
-PY_PACKAGES = ("flexmb_core", "ros2_node")
+PY_PACKAGES = ("flexmb_core", "flexmb_io", "ros2_node", "flexmb")
 
 
 def _version() -> str:
@@ -38,7 +39,7 @@ def _version() -> str:
 
 
 def _package_data() -> dict[str, list[str]]:
-    # non-Python files inside the packages (e.g. ros2_node/bag/msgdefs/**/*.msg, py.typed)
+    # non-Python files inside the packages (e.g. py.typed)
     data = {}
     for top in PY_PACKAGES:
         files = [p.relative_to(REPO / top).as_posix() for p in (REPO / top).rglob("*")
@@ -59,9 +60,9 @@ setup(
     version=_version(),
     description="flexmb: a real-time flexible digital twin of actuated spatial mechanisms as a ROS 2 node",
     license="Apache-2.0",
-    # flexmb_core and ros2_node here are symlinks to the repository's packages (setuptools' develop,
+    # the packages here are symlinks to the repository's packages (setuptools' develop,
     # i.e. colcon --symlink-install, refuses packages outside the setup directory)
-    packages=find_packages(where=str(HERE), include=[f"{p}*" for p in PY_PACKAGES]),
+    packages=find_packages(where=str(HERE), include=[q for p in PY_PACKAGES for q in (p, f"{p}.*")]),
     package_data=_package_data(),
     data_files=[
         ("share/ament_index/resource_index/packages", _relative([HERE / "resource" / PACKAGE])),
@@ -73,9 +74,9 @@ setup(
     zip_safe=False,
     entry_points={
         "console_scripts": [
-            "flexmb_node = ros2_node.ros_entry:node_main",
-            "flexmb_player = ros2_node.ros_entry:player_main",
-            "flexmb = ros2_node.cli:main",
+            "flexmb_node = flexmb.ros_entry:node_main",
+            "flexmb_player = flexmb.ros_entry:player_main",
+            "flexmb = flexmb.cli:main",
         ],
     },
 )

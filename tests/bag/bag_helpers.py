@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-FLEXMB = [sys.executable, "-m", "ros2_node.cli"]
+FLEXMB = [sys.executable, "-m", "flexmb.cli"]
 STEWART_BARS = "scenes/stewart_platform_bars.yaml"
 
 

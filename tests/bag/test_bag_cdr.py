@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ros2_node import messages as M
-from ros2_node.bag.cdr import CdrError, compile_encoder
-from ros2_node.bag.schemas import RECORDED_TYPES, schema_text
+from flexmb_io import messages as M
+from flexmb_io.bag.cdr import CdrError, compile_encoder
+from flexmb_io.bag.schemas import RECORDED_TYPES, schema_text
 
 
 def _sample_messages() -> dict:

@@ -1,7 +1,7 @@
 """A recording made the way the live node makes it — commands as received (named, stamped, and
 trajectories) logged at the twin's time, outputs at a publish rate, the node's settings — replays
 bit-identically, honouring the recorded runner options (command timeout and ramp to rest).
-No rclpy: the node's stepping is TwinRunner's, its messages are ros2_node.messages'."""
+No rclpy: the node's stepping is TwinRunner's, its messages are flexmb_io.messages'."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import numpy as np
 
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
-from ros2_node import messages as M
-from ros2_node import topics as T
-from ros2_node.bag.reader import BagReader
-from ros2_node.bag.recorder import BagRecorder
-from ros2_node.bag.replay import replay
-from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+from flexmb_io import messages as M
+from flexmb_io import topics as T
+from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.recorder import BagRecorder
+from flexmb_io.bag.replay import replay
+from flexmb_io.twin import RunnerOptions, TwinRunner, apply_message
 
 from bag_helpers import ROOT, STEWART_BARS
 
@@ -90,7 +90,7 @@ def test_replay_without_the_recorded_options_would_differ(tmp_path):
     """The same bag replayed with the default options (hold, 0.5 s) must fail: the options count."""
     import json
 
-    from ros2_node.bag.writer import BagWriter
+    from flexmb_io.bag.writer import BagWriter
 
     _record_like_the_node(tmp_path / "node", RunnerOptions(command_timeout=0.05, timeout_behaviour="ramp_to_rest",
                                                            ramp_time=0.05))

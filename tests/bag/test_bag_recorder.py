@@ -9,10 +9,10 @@ import struct
 import pytest
 import yaml
 
-from ros2_node import messages as M
-from ros2_node.bag.reader import MAGIC, BagReader, recover
-from ros2_node.bag.recorder import BagRecorder
-from ros2_node.bag.writer import BagError
+from flexmb_io import messages as M
+from flexmb_io.bag.reader import MAGIC, BagReader, recover
+from flexmb_io.bag.recorder import BagRecorder
+from flexmb_io.bag.writer import BagError
 
 from bag_helpers import ROOT
 
@@ -182,7 +182,7 @@ def test_reader_rejects_what_is_not_a_bag(tmp_path):
 def test_bag_info_agrees_with_a_clean_bag_that_declared_an_unused_topic(tmp_path):
     """The node declares every topic it may record; one never written (a command topic nobody
     used) is listed in metadata.yaml with 0 messages and must not make `bag info` cry 'DIFFERS'."""
-    from ros2_node.bag.info import bag_info, format_info
+    from flexmb_io.bag.info import bag_info, format_info
 
     out = tmp_path / "bag"
     rec = _record(out, n=100)

@@ -8,8 +8,8 @@ import json
 import pytest
 import yaml
 
-from ros2_node.bag.reader import BagReader
-from ros2_node.bag.replay import replay
+from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.replay import replay
 
 from bag_helpers import ROOT, STEWART_BARS, flexmb
 
@@ -145,14 +145,14 @@ def test_a_shortened_last_step_replays_exactly(tmp_path):
     (["--override", "materials.steel.E=-5"], "materials.steel.E"),
 ])
 def test_bad_replay_input_exits_1_with_a_message(stewart_bag, args, message, capsys):
-    from ros2_node.cli import main
+    from flexmb.cli import main
 
     assert main(["replay", str(stewart_bag), *args]) == 1
     assert message in capsys.readouterr().err
 
 
 def test_not_a_bag_and_bad_record_rate_exit_1(tmp_path, capsys):
-    from ros2_node.cli import main
+    from flexmb.cli import main
 
     assert main(["replay", str(tmp_path / "missing")]) == 1
     assert "no such file or directory" in capsys.readouterr().err

@@ -1,6 +1,6 @@
 """The message definitions embedded in recordings match the installed ROS 2 interfaces.
 
-Recording works without ROS from the copies in ``ros2_node/bag/msgdefs`` (standard types) and
+Recording works without ROS from the copies in ``flexmb_io/bag/msgdefs`` (standard types) and
 ``msgs/msg`` (flexmb_msgs). Where the interface packages are installed (the venv's ament prefix),
 each copy must equal the installed ``.msg`` (comments aside), and the RIHS01 type hash written to
 ``metadata.yaml`` must equal the one rosidl generated (``share/<pkg>/msg/<Type>.json``).
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ros2_node.bag import schemas
-from ros2_node.bag.rosbag2 import type_hash
+from flexmb_io.bag import schemas
+from flexmb_io.bag.rosbag2 import type_hash
 
 VENDORED = sorted(schemas.VENDORED.glob("*/msg/*.msg"))
 
@@ -53,7 +53,7 @@ def test_vendored_definitions_match_the_installed_interfaces():
             missing.append(f"{pkg}/{name}")            # tf2_msgs is not on PyPI
             continue
         assert schemas.strip_comments(path.read_text()) == schemas.strip_comments(inst.read_text()), (
-            f"{path} differs from {inst}: refresh with python -m ros2_node.bag.schemas --refresh PREFIX")
+            f"{path} differs from {inst}: refresh with python -m flexmb_io.bag.schemas --refresh PREFIX")
         compared.append(f"{pkg}/{name}")
     assert len(compared) >= 15, (compared, missing)
     assert set(missing) <= {"tf2_msgs/TFMessage"}, missing

@@ -11,14 +11,14 @@ import pytest
 
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
-from ros2_node import messages as M
-from ros2_node import topics as T
-from ros2_node.bag.cdr import compile_encoder
-from ros2_node.bag.reader import BagReader
-from ros2_node.bag.recorder import BagRecorder
-from ros2_node.bag.replay import replay
-from ros2_node.shells import SUBTRIANGLES, ShellShapes, shell_triangles
-from ros2_node.twin import TwinRunner
+from flexmb_io import messages as M
+from flexmb_io import topics as T
+from flexmb_io.bag.cdr import compile_encoder
+from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.recorder import BagRecorder
+from flexmb_io.bag.replay import replay
+from flexmb_io.shells import SUBTRIANGLES, ShellShapes, shell_triangles
+from flexmb_io.twin import TwinRunner
 
 from bag_helpers import ROOT, STEWART_BARS, flexmb
 

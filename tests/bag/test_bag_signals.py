@@ -16,9 +16,9 @@ import time
 import pytest
 import yaml
 
-from ros2_node.bag.defaults import CHUNK_SECONDS
-from ros2_node.bag.reader import BagReader
-from ros2_node.bag.replay import replay
+from flexmb_io.bag.defaults import CHUNK_SECONDS
+from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.replay import replay
 
 from bag_helpers import FLEXMB, ROOT
 

@@ -17,12 +17,12 @@ import pytest
 
 from flexmb_core.study.calibrate import CalibrationError, FitParam, bounds, fit, parse_fit
 from flexmb_core.scene.overrides import OverrideError
-from ros2_node import messages as M
-from ros2_node import topics as T
-from ros2_node.bag.calibrate import read_measurements, residuals, start_values
-from ros2_node.bag.cdr import compile_encoder
-from ros2_node.bag.reader import BagReader, recover
-from ros2_node.cli import main
+from flexmb_io import messages as M
+from flexmb_io import topics as T
+from flexmb_io.bag.calibrate import read_measurements, residuals, start_values
+from flexmb_io.bag.cdr import compile_encoder
+from flexmb_io.bag.reader import BagReader, recover
+from flexmb.cli import main
 
 from bag_helpers import ROOT
 
@@ -66,7 +66,7 @@ def add_noise(src: Path, dst: Path, seed: int = 1) -> None:
     from mcap_ros2.decoder import DecoderFactory
     from scipy.spatial.transform import Rotation
 
-    from ros2_node.live_replay import obj_to_dict
+    from flexmb_io.bag.reader import obj_to_dict
 
     r = BagReader(src)
     decoders = {ch.topic: DecoderFactory().decoder_for("cdr", r.schemas[ch.schema_id]) for ch in r.channels.values()}
@@ -158,8 +158,8 @@ def test_calibrates_a_node_style_bag_from_its_joint_states(tmp_path, client):
     from the efforts (noise-free: to 1e-4)."""
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.scene import load_scene
-    from ros2_node.bag.recorder import BagRecorder
-    from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+    from flexmb_io.bag.recorder import BagRecorder
+    from flexmb_io.twin import RunnerOptions, TwinRunner, apply_message
 
     truth = (NOMINAL[0], NOMINAL[1], NOMINAL[2] + 1.0)
     scene = tmp_path / "truth.yaml"
@@ -264,8 +264,8 @@ def test_bad_calibrate_flags_exit_1_with_the_reason(measured, args, message, cap
 
 
 def test_a_bag_without_commands_is_refused(tmp_path, capsys):
-    from ros2_node.bag.recorder import BagRecorder
-    from ros2_node.twin import TwinRunner
+    from flexmb_io.bag.recorder import BagRecorder
+    from flexmb_io.twin import TwinRunner
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.scene import load_scene
 

@@ -11,10 +11,10 @@ import warnings
 import pytest
 import yaml
 
-from ros2_node.bag.reader import BagReader
-from ros2_node.bag.recorder import scene_sha256
-from ros2_node.bag.regenerate import load_manifest
-from ros2_node.bag.replay import replay
+from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.recorder import scene_sha256
+from flexmb_io.bag.regenerate import load_manifest
+from flexmb_io.bag.replay import replay
 
 from bag_helpers import ROOT
 

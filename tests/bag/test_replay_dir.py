@@ -14,7 +14,7 @@ import shutil
 import pytest
 import yaml
 
-from ros2_node.cli import main
+from flexmb.cli import main
 
 from bag_helpers import ROOT
 

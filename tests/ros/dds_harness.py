@@ -18,7 +18,7 @@ class NodeProcess:
     def __init__(self, args: list[str], env: dict, log_path: Path):
         self.log_path = log_path
         self._log = open(log_path, "w")
-        self.proc = subprocess.Popen([sys.executable, "-m", "ros2_node.cli", "node", *args], env=env, cwd=ROOT,
+        self.proc = subprocess.Popen([sys.executable, "-m", "flexmb.cli", "node", *args], env=env, cwd=ROOT,
                                      stdout=self._log, stderr=subprocess.STDOUT)
 
     def log(self) -> str:
@@ -49,7 +49,7 @@ class TwinClient:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        from ros2_node import topics as T
+        from flexmb_io import topics as T
         from ros2_node.convert import message_class
 
         self.T = T

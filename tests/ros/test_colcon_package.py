@@ -4,9 +4,9 @@ A temporary workspace holds ``flexmb_msgs`` (``msgs/``), ``tf2_msgs`` (``ros/tf2
 (``ros/flexmb``, ament_python), built by PyPI's colcon against the venv's ROS 2 wheels. Then, with the
 environment of the workspace's ``install/setup.bash``:
 
-- the install holds every file of the ``flexmb_core`` and ``ros2_node`` packages, the executables in
-  ``lib/flexmb``, the ament index marker, the launch file and the scenes; ``tf2_msgs`` generated the
-  standard RIHS01 hash;
+- the install holds every file of the ``flexmb_core``, ``flexmb_io``, ``ros2_node`` and ``flexmb``
+  packages, the executables in ``lib/flexmb``, the ament index marker, the launch file and the
+  scenes; ``tf2_msgs`` generated the standard RIHS01 hash;
 - the twin is started exactly as the *installed* launch file starts it (``flexmb_node`` found through
   the ament index like ``ros2 run``, node name and parameters file as ``launch_ros`` passes them) and
   answers commands over DDS, publishes ``/tf``, and imports the workspace's packages, not the venv's.
@@ -87,7 +87,7 @@ def test_install_layout(workspace):
     assert (prefix / "share" / "flexmb" / "launch" / "twin.launch.py").is_file()
     assert (prefix / "share" / "flexmb" / "scenes" / SCENE).read_text() == (ROOT / "scenes" / SCENE).read_text()
     [site] = list((prefix / "lib").glob("python3*/site-packages"))
-    for top in ("flexmb_core", "ros2_node"):
+    for top in ("flexmb_core", "flexmb_io", "ros2_node", "flexmb"):
         source = {p.relative_to(ROOT).as_posix() for p in (ROOT / top).rglob("*")
                   if p.is_file() and p.suffix != ".pyc" and "__pycache__" not in p.parts}
         installed = {p.relative_to(site).as_posix() for p in (site / top).rglob("*")
@@ -96,10 +96,10 @@ def test_install_layout(workspace):
     tf_json = (install / "tf2_msgs" / "share" / "tf2_msgs" / "msg" / "TFMessage.json").read_text()
     assert standard_tfmessage_hash() in tf_json
     # the workspace's packages come first, as a ROS user's overlay would
-    where = subprocess.run([sys.executable, "-c", "import flexmb_core, ros2_node, flexmb_msgs, tf2_msgs as m; "
-                            "print('\\n'.join(x.__file__ for x in (flexmb_core, ros2_node, flexmb_msgs, m)))"],
+    where = subprocess.run([sys.executable, "-c", "import flexmb, flexmb_core, flexmb_io, ros2_node, flexmb_msgs, tf2_msgs as m; "
+                            "print('\\n'.join(x.__file__ for x in (flexmb, flexmb_core, flexmb_io, ros2_node, flexmb_msgs, m)))"],
                            env=env, cwd="/", capture_output=True, text=True, check=True, timeout=120).stdout.split()
-    assert len(where) == 4 and all(Path(w).is_relative_to(install) for w in where), where
+    assert len(where) == 6 and all(Path(w).is_relative_to(install) for w in where), where
 
 
 def test_ros2_run_twin_from_the_launch_file_answers_commands(workspace, tmp_path, dds_env, monkeypatch):

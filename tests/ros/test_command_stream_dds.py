@@ -18,10 +18,10 @@ from dds_harness import ROOT, NodeProcess, TwinClient  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from ros2_node import messages as M  # noqa: E402
-from ros2_node import topics as T  # noqa: E402
+from flexmb_io import messages as M  # noqa: E402
+from flexmb_io import topics as T  # noqa: E402
 from ros2_node.convert import to_ros  # noqa: E402
-from ros2_node.twin import RunnerOptions, TwinRunner  # noqa: E402
+from flexmb_io.twin import RunnerOptions, TwinRunner  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

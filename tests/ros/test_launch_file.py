@@ -124,9 +124,9 @@ def test_package_metadata_agrees_with_pyproject():
     assert root.findtext("name") == "flexmb" and root.findtext("version") == version
     assert root.find("export/build_type").text == "ament_python"
     deps = {e.text for e in root.findall("exec_depend")}
-    # every interface package ros2_node imports or names a type of is declared
+    # every interface package ros2_node imports or names a type of (its topic table in flexmb_io) is declared
     used = set()
-    for path in (ROOT / "ros2_node").rglob("*.py"):
+    for path in [*(ROOT / "ros2_node").rglob("*.py"), *(ROOT / "flexmb_io").rglob("*.py")]:
         used |= set(re.findall(r'(?:from |import |")([a-z0-9_]+_(?:msgs|srvs|interfaces))[./]', path.read_text()))
     assert {"flexmb_msgs", "tf2_msgs", "sensor_msgs"} <= used
     assert used <= deps, f"ros/flexmb/package.xml lacks <exec_depend> of {sorted(used - deps)}"

@@ -1,4 +1,4 @@
-"""What the node publishes (fast fillers) equals what it records (ros2_node.messages dicts)."""
+"""What the node publishes (fast fillers) equals what it records (flexmb_io.messages dicts)."""
 
 import numpy as np
 import pytest
@@ -10,11 +10,11 @@ from dds_harness import ROOT  # noqa: E402
 
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
-from ros2_node import messages as M  # noqa: E402
+from flexmb_io import messages as M  # noqa: E402
 from ros2_node.convert import to_dict  # noqa: E402
 from ros2_node.live_messages import LiveMessages  # noqa: E402
-from ros2_node.shells import shell_triangles  # noqa: E402
-from ros2_node.twin import TwinRunner  # noqa: E402
+from flexmb_io.shells import shell_triangles  # noqa: E402
+from flexmb_io.twin import TwinRunner  # noqa: E402
 
 
 @pytest.mark.parametrize("scene", ["stewart_platform_bars.yaml", "rps_manipulator.yaml", "stewart_platform_shell.yaml",

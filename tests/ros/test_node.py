@@ -23,10 +23,10 @@ from dds_harness import ROOT, NodeProcess, TwinClient  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from ros2_node import messages as M  # noqa: E402
-from ros2_node import topics as T  # noqa: E402
+from flexmb_io import messages as M  # noqa: E402
+from flexmb_io import topics as T  # noqa: E402
 from ros2_node.convert import to_ros  # noqa: E402
-from ros2_node.twin import TwinRunner, apply_message  # noqa: E402
+from flexmb_io.twin import TwinRunner, apply_message  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -219,7 +219,7 @@ def test_realtime_node_owns_the_clock(tmp_path, dds_env):
 
 
 def test_bad_parameter_fails_with_a_clear_message(dds_env):
-    p = subprocess.run([sys.executable, "-m", "ros2_node.cli", "node", SCENE, "--ros-args", "-p", "publish_rate:=-5.0"],
+    p = subprocess.run([sys.executable, "-m", "flexmb.cli", "node", SCENE, "--ros-args", "-p", "publish_rate:=-5.0"],
                        env=dds_env, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode != 0
     assert "publish_rate" in p.stderr + p.stdout

@@ -32,10 +32,10 @@ from dds_harness import ROOT, NodeProcess  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from ros2_node import messages as M  # noqa: E402
-from ros2_node.bag.reader import BagReader  # noqa: E402
+from flexmb_io import messages as M  # noqa: E402
+from flexmb_io.bag.reader import BagReader  # noqa: E402
 from ros2_node.convert import message_class, to_ros  # noqa: E402
-from ros2_node.twin import TwinRunner  # noqa: E402
+from flexmb_io.twin import TwinRunner  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -180,7 +180,7 @@ def test_joint_state_commands_drive_the_twin_like_float64_commands(tmp_path, dds
     assert "/flexmb_twin/joint_commands: rejected (unknown_name): unknown actuator names [no_such_leg]" in log
     # recorded like the other command topics, and replayed offline to the last bit
     assert BagReader(bag).counts()["/flexmb_twin/joint_commands"] == steps + 1
-    p = subprocess.run([sys.executable, "-m", "ros2_node.cli", "replay", str(bag)], cwd=ROOT, env=dds_env,
+    p = subprocess.run([sys.executable, "-m", "flexmb.cli", "replay", str(bag)], cwd=ROOT, env=dds_env,
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0 and "bit-identical" in p.stdout, p.stdout + p.stderr
 
@@ -250,7 +250,7 @@ def test_two_namespaced_twins_run_side_by_side_without_crosstalk(tmp_path, dds_e
     assert tf and {t.child_frame_id for m in tf for t in m.transforms} == {"robot1/platform"}
     assert {t.header.frame_id for m in tf for t in m.transforms} == {"world"}
     # and it replays offline: the namespace and the frame prefix come from the bag's settings
-    from ros2_node.bag.replay import replay
+    from flexmb_io.bag.replay import replay
 
     rep = replay(bag)
     assert rep.ok and rep.samples_compared > 0 and rep.commands_applied == count["robot1"], rep.format()

@@ -11,7 +11,7 @@ pytest.importorskip("diagnostic_msgs")
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 
 from dds_harness import NodeProcess, TwinClient
-from ros2_node import topics as T
+from flexmb_io import topics as T
 
 pytestmark = pytest.mark.ros
 SCENE = "scenes/stewart_platform_bars.yaml"

@@ -19,13 +19,13 @@ from dds_harness import ROOT, NodeProcess, TwinClient  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from ros2_node import messages as M  # noqa: E402
-from ros2_node import topics as T  # noqa: E402
-from ros2_node.bag.reader import BagReader  # noqa: E402
+from flexmb_io import messages as M  # noqa: E402
+from flexmb_io import topics as T  # noqa: E402
+from flexmb_io.bag.reader import BagReader  # noqa: E402
 from ros2_node.convert import to_ros  # noqa: E402
 
 pytestmark = pytest.mark.ros
-FLEXMB = [sys.executable, "-m", "ros2_node.cli"]
+FLEXMB = [sys.executable, "-m", "flexmb.cli"]
 
 
 @pytest.mark.timeout(240)
@@ -119,7 +119,7 @@ def test_lockstep_node_publishes_records_and_logs_the_shells(tmp_path, dds_env):
     assert p.returncode == 0 and "bit-identical" in p.stdout, p.stdout + p.stderr
 
     from rerun.chunk import RrdReader
-    from ros2_node.viz.layout import ShellLayout
+    from flexmb_io.viz.layout import ShellLayout
 
     rows: dict[str, dict[int, np.ndarray]] = {}          # shell entity → sim_time (ns) → vertex positions
     for chunk in RrdReader(str(rrd)).stream():

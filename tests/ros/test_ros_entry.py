@@ -1,4 +1,4 @@
-"""``flexmb_node`` / ``flexmb_player``, the executables of the ROS package (``ros2_node.ros_entry``)."""
+"""``flexmb_node`` / ``flexmb_player``, the executables of the ROS package (``flexmb.ros_entry``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from ros2_node.ros_entry import node_argv, player_argv
+from flexmb.ros_entry import node_argv, player_argv
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -35,7 +35,7 @@ def test_player_drops_ros_arguments():
 @pytest.mark.ros
 def test_node_without_scene_says_which_parameter(dds_env):
     pytest.importorskip("rclpy")
-    proc = subprocess.run([sys.executable, "-m", "ros2_node.ros_entry", "--ros-args", "-r", "__node:=t"],
+    proc = subprocess.run([sys.executable, "-m", "flexmb.ros_entry", "--ros-args", "-r", "__node:=t"],
                           env=dds_env, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines()[-1] == "flexmb node: parameter 'scene': required (a scene YAML file), got ''"

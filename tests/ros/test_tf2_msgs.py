@@ -80,7 +80,7 @@ def test_venv_node_publishes_tf_live(tmp_path, dds_env):
     model = compile_scene(load_scene(str(SCENE)))
     log_path = tmp_path / "node.log"
     with open(log_path, "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "ros2_node.cli", "node", str(SCENE), "--mode", "lockstep"],
+        proc = subprocess.Popen([sys.executable, "-m", "flexmb.cli", "node", str(SCENE), "--mode", "lockstep"],
                                 env=dds_env, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
         try:
             out = drive_lockstep(model.actuators.l0, 30, dt=model.scene.solver.dt, alive=lambda: proc.poll() is None,

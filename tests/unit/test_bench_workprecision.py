@@ -26,7 +26,7 @@ def quick_b1(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wp")
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
     env.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".cache" / "numba"))
-    proc = subprocess.run([sys.executable, "-m", "ros2_node.cli", "bench", "--case", "b1", "--quick", "--no-peers",
+    proc = subprocess.run([sys.executable, "-m", "flexmb.cli", "bench", "--case", "b1", "--quick", "--no-peers",
                            "--out", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return out

@@ -19,10 +19,10 @@ import pytest
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
-from ros2_node import commands as C
-from ros2_node.commands import CommandSchedule
+from flexmb_io import commands as C
+from flexmb_io.commands import CommandSchedule
 from ros2_node.player import CommandSource, TableLookup
-from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+from flexmb_io.twin import RunnerOptions, TwinRunner, apply_message
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"

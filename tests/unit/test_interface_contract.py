@@ -1,9 +1,9 @@
 """The ROS interface is a contract: every topic and node parameter is documented in the README,
-and the topic table matches ros2_node.topics (names and types)."""
+and the topic table matches flexmb_io.topics (names and types)."""
 
 from pathlib import Path
 
-from ros2_node import topics as T
+from flexmb_io import topics as T
 from ros2_node.params import SPECS, NodeParams, check
 
 import pytest

@@ -12,7 +12,7 @@ from flexmb_core.errors import SceneError
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene.loader import parse_yaml, scene_from_dict
 from flexmb_core.servo import Servo, ServoParams, transition
-from ros2_node.twin import TwinRunner
+from flexmb_io.twin import TwinRunner
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"
@@ -127,7 +127,7 @@ def test_scene_servo_is_compiled_and_rolls_back_with_the_state():
 def test_servo_smooths_a_100_hz_staircase():
     """With a servo even the old step hold of a 100 Hz stream stays within the quasi-static forces."""
     from flexmb_core.simulator import Simulator
-    from ros2_node.twin import RunnerOptions
+    from flexmb_io.twin import RunnerOptions
     model = compile_scene(_servo_scene({"bandwidth_hz": 10.0, "damping_ratio": 0.9, "max_rate": 1.0,
                                         "max_accel": 20.0}))
     prog = Simulator(model)

@@ -11,9 +11,9 @@ import pytest
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
-from ros2_node import messages as M
-from ros2_node.realtime import Stepper, StepperConfig
-from ros2_node.twin import RunnerOptions, TwinRunner, apply_message
+from flexmb_io import messages as M
+from flexmb_io.realtime import Stepper, StepperConfig
+from flexmb_io.twin import RunnerOptions, TwinRunner, apply_message
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"

@@ -23,23 +23,24 @@ import numpy as np
 import pytest
 
 import flexmb_core
+import flexmb_io
 import ros2_node
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
-from ros2_node.twin import RunnerOptions, TwinRunner
+from flexmb_io.twin import RunnerOptions, TwinRunner
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 # twins a node serves: bar legs (the demo), frame legs, a shell platform, a boom with joints and a frame actuator
 TWINS = ("stewart_platform_bars.yaml", "stewart_platform_1el.yaml", "stewart_platform_shell.yaml",
          "boom_step.yaml")
 # modules that need a ROS or viewer install are not the time loop's
-SKIP = ("ros2_node.node", "ros2_node.node_cli", "ros2_node.player", "ros2_node.live", "ros2_node.viz",
-        "ros2_node.cli", "ros2_node.demo")
+SKIP = ("ros2_node.node", "ros2_node.node_cli", "ros2_node.player", "ros2_node.live", "flexmb_io.viz",
+        "ros2_node.demo")
 
 
 def _dispatchers() -> dict[str, numba.core.registry.CPUDispatcher]:
     out = {}
-    for pkg in (flexmb_core, ros2_node):
+    for pkg in (flexmb_core, flexmb_io, ros2_node):
         for info in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
             if info.name.startswith(SKIP):
                 continue
@@ -59,7 +60,7 @@ def _grown_after_start(scene: str) -> dict[str, list[str]]:
     model = compile_scene(load_scene(SCENES / scene, {"until": 1.0}))
     runner = TwinRunner(model, options=RunnerOptions())
     kernels = _dispatchers()
-    assert "flexmb_core.kernels.frame3d.frame_group" in kernels and "ros2_node.commands._evaluate_lines" in kernels
+    assert "flexmb_core.kernels.frame3d.frame_group" in kernels and "flexmb_io.commands._evaluate_lines" in kernels
     runner.start()
     before = {k: len(d.signatures) for k, d in kernels.items()}
     names = list(model.actuators.names)

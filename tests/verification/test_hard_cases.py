@@ -38,7 +38,7 @@ from flexmb_core.scene import load_scene, scene_from_dict
 from flexmb_core.scene.loader import parse_yaml
 from flexmb_core.signals import evaluate
 from flexmb_core.simulator import Simulator
-from ros2_node.twin import RunnerOptions, TwinRunner
+from flexmb_io.twin import RunnerOptions, TwinRunner
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 BARS = SCENES / "stewart_platform_bars.yaml"

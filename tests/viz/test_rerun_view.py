@@ -25,7 +25,7 @@ SERIES = ["plots/actuators/length", "plots/actuators/command", "plots/actuators/
           "plots/energy"]
 PLATFORM = ["world/platforms/platform/frame", "world/platforms/platform/mesh",
             "world/platforms/platform/outline"]
-ORANGE = (242, 140, 26)          # actuator colour (ros2_node.messages), as 8-bit RGB
+ORANGE = (242, 140, 26)          # actuator colour (flexmb_io.messages), as 8-bit RGB
 RADIATOR = ROOT / "scenes" / "radiator_panels.yaml"     # two shells of 4 cubic triangles (28 nodes)
 SHELLS = ["world/shells/panel1", "world/shells/panel2"]
 
@@ -38,7 +38,7 @@ needs_rerun = pytest.mark.skipif(not HAVE_RERUN, reason="rerun-sdk is not instal
 
 
 def flexmb(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "ros2_node.cli", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "flexmb.cli", *map(str, args)], capture_output=True,
                           text=True, cwd=ROOT, timeout=timeout)
 
 
@@ -82,7 +82,7 @@ def _grid_ns(times_s) -> set[int]:
 
 def _rgba_u32(rgba) -> int:
     """RGBA in [0, 1] → rerun's packed 0xRRGGBBAA."""
-    from ros2_node.viz.layout import rgba8
+    from flexmb_io.viz.layout import rgba8
 
     r, g, b, a = rgba8(rgba)
     return (r << 24) | (g << 16) | (b << 8) | a
@@ -91,7 +91,7 @@ def _rgba_u32(rgba) -> int:
 def _radiator_triangles() -> list[np.ndarray]:
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.scene import load_scene
-    from ros2_node.shells import shell_triangles
+    from flexmb_io.shells import shell_triangles
 
     return [shell_triangles(info.tri) for info in compile_scene(load_scene(RADIATOR)).shells]
 
@@ -128,13 +128,13 @@ def recording_rrd(recording, tmp_path_factory):
 # --- the command line without rerun -----------------------------------------------------------
 def test_cli_loads_without_rerun_and_names_the_missing_package():
     code = ("import sys; sys.modules['rerun'] = None\n"       # `import rerun` now raises ImportError
-            "import ros2_node.viz.cli, ros2_node.cli\n"
-            "p = ros2_node.cli.build_parser()\n"
+            "import flexmb_io.viz.cli, flexmb.cli\n"
+            "p = flexmb.cli.build_parser()\n"
             "a = p.parse_args(['view', 'x.mcap', '--png', 'o.png'])\n"
             "r = p.parse_args(['run', 's.yaml', '--rrd', 'o.rrd', '--rrd-period', '0.02'])\n"
             "assert a.func.__name__ == 'cmd_view' and r.rrd == 'o.rrd' and r.rrd_period == 0.02\n"
             "assert not any(m.startswith('rerun') and sys.modules[m] is not None for m in sys.modules)\n"
-            "sys.exit(ros2_node.cli.main(['view', 'x.mcap']))\n")
+            "sys.exit(flexmb.cli.main(['view', 'x.mcap']))\n")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert p.returncode == 1, p.stderr
     assert "flexmb view needs rerun-sdk" in p.stderr
@@ -193,7 +193,7 @@ def test_view_mcap_uses_header_stamps_and_the_attached_scene(recording, recordin
     # member kinds, supports and the camera come from scene.yaml
     assert "Points3D:positions" in data.static["world/supports"]
     # values survive MCAP → rerun: the final recorded state
-    from ros2_node.viz.recording import Recording
+    from flexmb_io.viz.recording import Recording
 
     last = [m.msg for m in Recording(recording["path"]).messages({"/flexmb_twin/actuator_states"})][-1]
     assert data.last("plots/actuators/length", "Scalars:scalars") == pytest.approx(list(last.lengths), abs=0)
@@ -236,13 +236,13 @@ def test_view_rosbag2_directory_with_period(tmp_path):
 
 @needs_rerun
 def test_view_reads_a_bag_of_the_recorder(tmp_path):
-    """Bags of ``ros2_node.bag.recorder`` (log time = simulated time, chunks per 0.25 s) view alike."""
-    recorder = pytest.importorskip("ros2_node.bag.recorder")
+    """Bags of ``flexmb_io.bag.recorder`` (log time = simulated time, chunks per 0.25 s) view alike."""
+    recorder = pytest.importorskip("flexmb_io.bag.recorder")
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.report import TwinReporter
     from flexmb_core.scene import load_scene
     from flexmb_core.simulator import Simulator
-    from ros2_node import messages, topics
+    from flexmb_io import messages, topics
 
     model = compile_scene(load_scene(SCENE))
     sim = Simulator(model)
@@ -275,7 +275,7 @@ def test_view_reads_a_bag_of_the_recorder(tmp_path):
 @needs_rerun
 def test_view_reads_a_file_cut_short(recording, tmp_path):
     """A killed recorder leaves no summary and an unfinished chunk: keep what is complete."""
-    from ros2_node.viz.view import view_recording
+    from flexmb_io.viz.view import view_recording
     from twin_recording import write_recording
 
     rec = write_recording(SCENE, tmp_path / "long.mcap", until=0.2, attach_scene=False, chunk_size=16 << 10)
@@ -295,7 +295,7 @@ def test_view_reads_a_file_cut_short(recording, tmp_path):
 def test_run_rrd_logs_each_shell_as_a_mesh(tmp_path, shell_recording):
     """``flexmb run --rrd``: one Mesh3D per shell, its 9 flat triangles per element static, the
     node positions every 10 ms, in the shell colour."""
-    from ros2_node.messages import SHELL_RGBA
+    from flexmb_io.messages import SHELL_RGBA
 
     rrd = tmp_path / "radiator.rrd"
     p = flexmb("run", RADIATOR, "--until", "0.05", "--rrd", rrd, "--quiet")
@@ -337,8 +337,8 @@ def test_view_folds_the_triangle_lists_back_onto_the_shell_nodes(shell_recording
 def test_view_without_scene_draws_each_triangle_list_as_is(tmp_path):
     """No scene: the mesh is the marker's triangle list (3 vertices a triangle), in the marker's
     colour, and the camera's bounds take in the shells."""
-    from ros2_node.messages import SHELL_RGBA
-    from ros2_node.viz.view import view_recording
+    from flexmb_io.messages import SHELL_RGBA
+    from flexmb_io.viz.view import view_recording
     from twin_recording import write_recording
 
     rec = write_recording(RADIATOR, tmp_path / "bare.mcap", until=0.01, attach_scene=False)
@@ -362,7 +362,7 @@ def test_view_without_scene_draws_each_triangle_list_as_is(tmp_path):
 def test_layout_of_a_shell_scene_knows_its_meshes_and_bounds():
     from flexmb_core.model.compile import compile_scene
     from flexmb_core.scene import load_scene
-    from ros2_node.viz.layout import TwinLayout
+    from flexmb_io.viz.layout import TwinLayout
 
     model = compile_scene(load_scene(RADIATOR))
     lay = TwinLayout.from_model(model)
@@ -404,7 +404,7 @@ def test_view_rejects_what_is_not_a_recording(tmp_path):
 # --- headless PNG -----------------------------------------------------------------------------
 @needs_rerun
 def test_png_snapshot_shows_the_legs(recording, tmp_path):
-    from ros2_node.viz.snapshot import rerun_executable, vulkan_drivers
+    from flexmb_io.viz.snapshot import rerun_executable, vulkan_drivers
 
     if rerun_executable() is None or not vulkan_drivers():
         pytest.skip("no rerun viewer binary or no Vulkan driver (apt-get install mesa-vulkan-drivers)")

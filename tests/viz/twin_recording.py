@@ -1,7 +1,7 @@
 """Write a twin recording (ROS 2 MCAP, the live node's topics) from an offline simulation.
 
-A test fixture until ``ros2_node.bag.recorder`` lands: the same message dicts
-(``ros2_node.messages``) and schemas (``ros2_node.bag.schemas``) the recorder uses, the scene as
+A test fixture until ``flexmb_io.bag.recorder`` lands: the same message dicts
+(``flexmb_io.messages``) and schemas (``flexmb_io.bag.schemas``) the recorder uses, the scene as
 the attachment ``scene.yaml`` and a ``flexmb`` metadata record. Log times are a wall-clock-like
 epoch, unlike the header stamps (simulated time), so a reader that used log times would be caught.
 
@@ -20,9 +20,9 @@ from flexmb_core.model.compile import compile_scene
 from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
-from ros2_node import messages, topics
-from ros2_node.bag.schemas import schema_text
-from ros2_node.shells import ShellShapes
+from flexmb_io import messages, topics
+from flexmb_io.bag.schemas import schema_text
+from flexmb_io.shells import ShellShapes
 
 LOG_EPOCH_NS = 1_700_000_000_000_000_000      # log times start here (s since 1970: 2023-11-14)
 

@@ -1,0 +1,7 @@
+"""``python -m flexmb`` is the ``flexmb`` command."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
