@@ -121,7 +121,6 @@ def compare_bags(old, new, node_name: str, *, abs_tol: float = 1e-9, rel_tol: fl
 def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1e-9, rel_tol: float = 1e-9) -> int:
     from flexmb_io.bag.reader import BagReader
 
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     old = BagReader(bag)
     scene_text = old.scene_text()
     if scene_text is None:
@@ -146,7 +145,7 @@ def replay_live(bag: str, *, out: str, timeout: float = 30.0, abs_tol: float = 1
     tmp = Path(tempfile.mkdtemp(prefix="flexmb_replay_live_"))
     scene_file = tmp / "scene.yaml"
     scene_file.write_text(scene_text)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(os.environ)                 # the discovery range cmd_replay_live configured (ros2_node.dds)
     env.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
     os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
     node_cmd = [sys.executable, "-m", "flexmb.cli", "node", str(scene_file), "--name", node_name, "--mode",

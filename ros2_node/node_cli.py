@@ -27,13 +27,18 @@ _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "comman
 INTERRUPTED = 130
 
 
-def _localhost_only() -> None:
-    # DDS discovery must never leave the machine (the core's main() sets the BLAS and numba defaults).
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+def _discovery(args: argparse.Namespace) -> None:
+    """Where DDS may go (ros2_node.dds: localhost by default, every socket on 127.0.0.1; subnet on
+    request, with a warning). Before rclpy starts; the processes of ``flexmb demo`` inherit it."""
+    from .dds import configure
+
+    _, note = configure(getattr(args, "discovery_range", None))
+    if note:
+        print(f"flexmb {args.verb}: {note}", file=sys.stderr)
 
 
 def cmd_node(args: argparse.Namespace) -> int:
-    _localhost_only()
+    _discovery(args)
     from .node import run_node
 
     values = {"scene": args.scene}
@@ -52,7 +57,7 @@ def cmd_node(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
-    _localhost_only()
+    _discovery(args)
     from .player import CommandSource, run_player
 
     if args.csv:
@@ -75,7 +80,7 @@ def _fmt_ms(x) -> str:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """The twin and the player as two processes on DDS; prints one summary."""
-    _localhost_only()
+    _discovery(args)
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
     out = Path(args.out)
@@ -166,7 +171,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_replay_live(args: argparse.Namespace) -> int:
-    _localhost_only()
+    _discovery(args)
     from .live_replay import replay_live
 
     return replay_live(args.bag, out=args.out, timeout=args.timeout, abs_tol=args.abs_tol, rel_tol=args.rel_tol)
@@ -206,7 +211,7 @@ def register(verbs, run_parser) -> None:
                    "lifecycle_msgs/srv/ChangeState calls) configures and activates the node")
     n.add_argument("--quiet", action="store_true", help="do not print the summary")
     n.add_argument("--ros-args", nargs=argparse.REMAINDER, default=None, help="ROS arguments (e.g. -p dt:=0.002)")
-    n.set_defaults(func=cmd_node, record=None)
+    n.set_defaults(func=cmd_node, record=None, verb="node")
 
     p = verbs.add_parser("play", help="stream actuator commands to a twin node (controller stand-in)")
     p.add_argument("scene", nargs="?", help="scene whose command definition to play")
@@ -221,7 +226,7 @@ def register(verbs, run_parser) -> None:
     p.add_argument("--timeout", type=float, default=30.0, help="s to wait for the twin")
     p.add_argument("--json", metavar="OUT", help="write the player summary here")
     p.add_argument("--quiet", action="store_true")
-    p.set_defaults(func=cmd_play)
+    p.set_defaults(func=cmd_play, verb="play")
 
     rl = verbs.add_parser("replay-live", help="replay a recording into a live lockstep node over DDS and "
                           "compare the node's new recording with it")
@@ -230,7 +235,7 @@ def register(verbs, run_parser) -> None:
     rl.add_argument("--timeout", type=float, default=30.0, help="s to wait for each acknowledgement")
     rl.add_argument("--abs-tol", type=float, default=1e-9, help="absolute tolerance of every number")
     rl.add_argument("--rel-tol", type=float, default=1e-9, help="tolerance relative to the peak of each field")
-    rl.set_defaults(func=cmd_replay_live)
+    rl.set_defaults(func=cmd_replay_live, verb="replay-live")
 
     d = verbs.add_parser("demo", help="twin node + player as two processes on DDS, with a summary")
     d.add_argument("scene", nargs="?", default="scenes/stewart_platform.yaml")
@@ -243,4 +248,9 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority of the node's stepping thread")
     d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
     d.add_argument("--out", default="build/demo", help="directory of the JSON summaries")
-    d.set_defaults(func=cmd_demo)
+    d.set_defaults(func=cmd_demo, verb="demo")
+    for parser in (n, p, rl, d):
+        parser.add_argument("--discovery-range", choices=("localhost", "subnet"), default=None,
+                            help="where DDS may reach: localhost (default: every socket on 127.0.0.1) or subnet "
+                                 "(other machines, no DDS security; a warning); default from FLEXMB_DISCOVERY_RANGE, "
+                                 "else ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, else localhost")
