@@ -1,14 +1,17 @@
-"""A :class:`~flexmb_core.report.TwinSample` as ROS messages, in plain dicts (no rclpy).
+"""A :class:`~flexmb_core.report.TwinSample` as ROS messages: the one form both the node and the
+recordings use.
 
-One dict per message, with the ROS field names: ``mcap_ros2`` encodes them straight into a
-recording, and :func:`ros2_node.convert.to_ros` fills the rclpy message the live node publishes,
-so live topics and recordings cannot disagree. Time stamps are the simulated time (the node owns
-the clock and publishes it on ``/clock``). Frame ids come from a :class:`Frames` (the node's
-``world_frame`` and ``frame_prefix`` parameters; ``world`` and no prefix by default).
+Each builder returns a message object of :mod:`flexmb_io.wire`'s type store (rosbags dataclasses,
+numeric sequences as float64 arrays). The live node serializes it once and publishes and records the
+same bytes; ``flexmb run --mcap`` records the bytes of the same builders, so live topics and
+recordings cannot disagree. Time stamps are the simulated time (the node owns the clock and
+publishes it on ``/clock``). Frame ids come from a :class:`Frames` (the node's ``world_frame`` and
+``frame_prefix`` parameters; ``world`` and no prefix by default).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +20,7 @@ from flexmb_core.report import TwinSample
 
 from .shells import ShellShapes
 from .topics import WORLD_FRAME
+from .wire import message_type as _type
 
 MARKER_LINE_STRIP = 4
 MARKER_TRIANGLE_LIST = 11
@@ -41,10 +45,10 @@ class Frames:
 DEFAULT_FRAMES = Frames()
 
 
-def stamp(t: float) -> dict:
+def stamp(t: float):
     """``builtin_interfaces/Time`` of a time in seconds (t ≥ 0), rounded to the nanosecond."""
     ns = int(round(t * 1e9))
-    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+    return _type("builtin_interfaces/msg/Time")(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def stamp_seconds(st) -> float:
@@ -54,52 +58,87 @@ def stamp_seconds(st) -> float:
     return st.sec + 1e-9 * st.nanosec
 
 
-def header(t: float, frame_id: str = WORLD_FRAME) -> dict:
-    return {"stamp": stamp(t), "frame_id": frame_id}
+def header(t: float, frame_id: str = WORLD_FRAME):
+    return _type("std_msgs/msg/Header")(stamp=stamp(t), frame_id=frame_id)
 
 
-def joint_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
+def _f64(*parts) -> np.ndarray:
+    return np.concatenate(parts).astype(np.float64, copy=False) if len(parts) > 1 else np.array(parts[0], np.float64)
+
+
+def joint_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES):
     """``sensor_msgs/JointState``: actuators (length, rate, axial force as effort), then the passive
     joints (angle, rate, zero effort: the joints are frictionless)."""
-    nj = len(s.joint_names)
-    return {"header": header(s.t, frames.world),
-            "name": list(s.actuator_names) + list(s.joint_names),
-            "position": s.actuator_lengths.tolist() + s.joint_positions.tolist(),
-            "velocity": s.actuator_velocities.tolist() + s.joint_velocities.tolist(),
-            "effort": s.actuator_forces.tolist() + [0.0] * nj}
+    return _type("sensor_msgs/msg/JointState")(
+        header=header(s.t, frames.world), name=list(s.actuator_names) + list(s.joint_names),
+        position=_f64(s.actuator_lengths, s.joint_positions), velocity=_f64(s.actuator_velocities, s.joint_velocities),
+        effort=_f64(s.actuator_forces, np.zeros(len(s.joint_names))))
 
 
-def actuator_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
+def actuator_state(s: TwinSample, frames: Frames = DEFAULT_FRAMES):
     """``flexmb_msgs/ActuatorState``."""
-    return {"header": header(s.t, frames.world), "names": list(s.actuator_names),
-            "lengths": s.actuator_lengths.tolist(), "velocities": s.actuator_velocities.tolist(),
-            "commanded_lengths": s.actuator_commands.tolist(), "axial_forces": s.actuator_forces.tolist()}
+    return _type("flexmb_msgs/msg/ActuatorState")(
+        header=header(s.t, frames.world), names=list(s.actuator_names), lengths=_f64(s.actuator_lengths),
+        velocities=_f64(s.actuator_velocities), commanded_lengths=_f64(s.actuator_commands),
+        axial_forces=_f64(s.actuator_forces))
 
 
-def _pose(position: np.ndarray, wxyz: np.ndarray) -> dict:
-    return {"position": {"x": float(position[0]), "y": float(position[1]), "z": float(position[2])},
-            "orientation": {"x": float(wxyz[1]), "y": float(wxyz[2]), "z": float(wxyz[3]), "w": float(wxyz[0])}}
+def _point(position, kind: str = "geometry_msgs/msg/Point"):
+    return _type(kind)(x=float(position[0]), y=float(position[1]), z=float(position[2]))
 
 
-def platform_pose(s: TwinSample, index: int = 0, frames: Frames = DEFAULT_FRAMES) -> dict:
+def _quaternion(wxyz):
+    return _type("geometry_msgs/msg/Quaternion")(x=float(wxyz[1]), y=float(wxyz[2]), z=float(wxyz[3]), w=float(wxyz[0]))
+
+
+def _pose(position, wxyz):
+    return _type("geometry_msgs/msg/Pose")(position=_point(position), orientation=_quaternion(wxyz))
+
+
+def platform_pose(s: TwinSample, index: int = 0, frames: Frames = DEFAULT_FRAMES):
     """``geometry_msgs/PoseStamped`` of the ``index``-th platform."""
     p = s.poses[index]
-    return {"header": header(s.t, frames.world), "pose": _pose(p.position, p.orientation_wxyz)}
+    return _type("geometry_msgs/msg/PoseStamped")(header=header(s.t, frames.world),
+                                                  pose=_pose(p.position, p.orientation_wxyz))
 
 
-def tf(s: TwinSample, frames: Frames = DEFAULT_FRAMES) -> dict:
+def tf(s: TwinSample, frames: Frames = DEFAULT_FRAMES):
     """``tf2_msgs/TFMessage``: world → one frame per platform, named after its output (with the
     frame prefix)."""
-    out = []
-    for p in s.poses:
-        pose = _pose(p.position, p.orientation_wxyz)
-        out.append({"header": header(s.t, frames.world), "child_frame_id": frames.child(p.name),
-                    "transform": {"translation": pose["position"], "rotation": pose["orientation"]}})
-    return {"transforms": out}
+    Transform, Stamped = _type("geometry_msgs/msg/Transform"), _type("geometry_msgs/msg/TransformStamped")
+    out = [Stamped(header=header(s.t, frames.world), child_frame_id=frames.child(p.name),
+                   transform=Transform(translation=_point(p.position, "geometry_msgs/msg/Vector3"),
+                                       rotation=_quaternion(p.orientation_wxyz)))
+           for p in s.poses]
+    return _type("tf2_msgs/msg/TFMessage")(transforms=out)
+
+
+@functools.lru_cache(maxsize=None)
+def _marker_constants() -> tuple:
+    """A marker's parts that never change (identity pose, zero lifetime, no texture or mesh), built once
+    and shared by every marker: constructing them per marker tripled the cost of ``~/shape``."""
+    from .wire import make
+
+    zero = make("visualization_msgs/msg/Marker")
+    zero.pose.orientation.w = 1.0
+    return zero.pose, zero.lifetime, zero.texture, zero.mesh_file
+
+
+def _marker(t: float, frames: Frames, ns: str, id_: int, type_: int, scale, rgba, points):
+    pose, lifetime, texture, mesh_file = _marker_constants()
+    Point = _type("geometry_msgs/msg/Point")
+    r, g, b, a = (float(np.float32(c)) for c in rgba)          # float32 on the wire
+    return _type("visualization_msgs/msg/Marker")(
+        header=header(t, frames.world), ns=ns, id=id_, type=type_, action=MARKER_ADD, pose=pose,
+        scale=_type("geometry_msgs/msg/Vector3")(x=float(scale[0]), y=float(scale[1]), z=float(scale[2])),
+        color=_type("std_msgs/msg/ColorRGBA")(r=r, g=g, b=b, a=a), lifetime=lifetime, frame_locked=False,
+        points=[Point(x=x, y=y, z=z) for x, y, z in np.asarray(points, dtype=np.float64).reshape(-1, 3).tolist()],
+        colors=[], texture_resource="", texture=texture, uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=mesh_file, mesh_use_embedded_materials=False)
 
 
 def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: ShellShapes | None = None,
-          frames: Frames = DEFAULT_FRAMES) -> dict:
+          frames: Frames = DEFAULT_FRAMES):
     """``visualization_msgs/MarkerArray``: one LINE_STRIP per member through its nodes, then one
     TRIANGLE_LIST per shell (ns = name, id = position in the array).
 
@@ -110,25 +149,13 @@ def shape(s: TwinSample, member_kinds: tuple[str, ...] | None = None, shells: Sh
     """
     markers = []
     for k, (name, pts) in enumerate(zip(s.member_names, s.member_points)):
-        r, g, b, a = MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", MEMBER_RGBA["frame"])
-        markers.append({
-            "header": header(s.t, frames.world), "ns": name, "id": k, "type": MARKER_LINE_STRIP, "action": MARKER_ADD,
-            "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),
-            "scale": {"x": float(s.member_widths[k]), "y": 0.0, "z": 0.0},
-            "color": {"r": r, "g": g, "b": b, "a": a},
-            "points": [{"x": float(x), "y": float(y), "z": float(z)} for x, y, z in pts],
-        })
+        rgba = MEMBER_RGBA.get(member_kinds[k] if member_kinds else "frame", MEMBER_RGBA["frame"])
+        markers.append(_marker(s.t, frames, name, k, MARKER_LINE_STRIP, (s.member_widths[k], 0.0, 0.0), rgba, pts))
     if shells is not None:
-        r, g, b, a = SHELL_RGBA
         for i, name in enumerate(shells.names):
-            markers.append({
-                "header": header(s.t, frames.world), "ns": name, "id": len(markers), "type": MARKER_TRIANGLE_LIST,
-                "action": MARKER_ADD, "pose": _pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])),
-                "scale": {"x": 1.0, "y": 1.0, "z": 1.0},
-                "color": {"r": r, "g": g, "b": b, "a": a},
-                "points": [{"x": x, "y": y, "z": z} for x, y, z in shells.vertices(i).tolist()],
-            })
-    return {"markers": markers}
+            markers.append(_marker(s.t, frames, name, len(markers), MARKER_TRIANGLE_LIST, (1.0, 1.0, 1.0),
+                                   SHELL_RGBA, shells.vertices(i)))
+    return _type("visualization_msgs/msg/MarkerArray")(markers=markers)
 
 
 @dataclass
@@ -147,31 +174,32 @@ class StatusTiming:
     message: str = ""                 # overrides the solver's message when set
 
 
-def status(s: TwinSample, timing: StatusTiming, frames: Frames = DEFAULT_FRAMES) -> dict:
+def status(s: TwinSample, timing: StatusTiming, frames: Frames = DEFAULT_FRAMES):
     """``flexmb_msgs/TwinStatus``."""
-    return {"header": header(s.t, frames.world), "converged": bool(s.converged),
-            "newton_iterations": int(s.newton_iterations), "residual": float(s.residual),
-            "kinetic_energy": float(s.kinetic_energy), "strain_energy": float(s.strain_energy),
-            "total_energy": float(s.total_energy), "step_wall_time": float(timing.step_wall_time),
-            "steps": int(timing.steps), "deadline_misses": int(timing.deadline_misses),
-            "unconverged_steps": int(timing.unconverged_steps),
-            "real_time_factor": float(timing.real_time_factor), "sim_time": float(s.t),
-            "substeps": int(s.substeps), "message": timing.message or s.message,
-            "command_stamp": stamp(timing.command_stamp), "command_latency": float(timing.command_latency),
-            "rejected_commands": int(timing.rejected_commands), "command_age": float(timing.command_age)}
+    return _type("flexmb_msgs/msg/TwinStatus")(
+        header=header(s.t, frames.world), converged=bool(s.converged), newton_iterations=int(s.newton_iterations),
+        residual=float(s.residual), kinetic_energy=float(s.kinetic_energy), strain_energy=float(s.strain_energy),
+        total_energy=float(s.total_energy), step_wall_time=float(timing.step_wall_time), steps=int(timing.steps),
+        deadline_misses=int(timing.deadline_misses), unconverged_steps=int(timing.unconverged_steps),
+        real_time_factor=float(timing.real_time_factor), sim_time=float(s.t), substeps=int(s.substeps),
+        message=timing.message or s.message, command_stamp=stamp(timing.command_stamp),
+        command_latency=float(timing.command_latency), rejected_commands=int(timing.rejected_commands),
+        command_age=float(timing.command_age))
 
 
-def clock(t: float) -> dict:
+def clock(t: float):
     """``rosgraph_msgs/Clock``."""
-    return {"clock": stamp(t)}
+    return _type("rosgraph_msgs/msg/Clock")(clock=stamp(t))
 
 
-def float64_array(values) -> dict:
+def float64_array(values):
     """``std_msgs/Float64MultiArray`` with an empty layout (the ForwardCommandController form)."""
-    return {"layout": {"dim": [], "data_offset": 0}, "data": [float(v) for v in values]}
+    layout = _type("std_msgs/msg/MultiArrayLayout")(dim=[], data_offset=0)
+    return _type("std_msgs/msg/Float64MultiArray")(layout=layout, data=np.array(values, dtype=np.float64).reshape(-1))
 
 
-def actuator_command(t: float, names, lengths, velocities=None) -> dict:
+def actuator_command(t: float, names, lengths, velocities=None):
     """``flexmb_msgs/ActuatorCommand``."""
-    return {"header": header(t), "names": list(names), "lengths": [float(v) for v in lengths],
-            "velocities": [] if velocities is None else [float(v) for v in velocities]}
+    return _type("flexmb_msgs/msg/ActuatorCommand")(
+        header=header(t), names=list(names), lengths=np.array(lengths, dtype=np.float64).reshape(-1),
+        velocities=np.array([] if velocities is None else velocities, dtype=np.float64).reshape(-1))

@@ -246,13 +246,14 @@ class TwinRunner:
 
 
 def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:
-    """Feed one decoded command message (rclpy message or dict) to the runner.
+    """Feed one decoded command message (rclpy or :mod:`flexmb_io.wire` message, or dict) to the runner.
 
     ``topic_kind`` is ``commands`` (Float64MultiArray), ``actuator_commands`` (ActuatorCommand),
     ``joint_trajectory`` (JointTrajectory) or ``joint_commands`` (JointState: the stamp counts only
     with the runner option ``joint_command_stamps``, else the command applies on arrival).
     """
-    get = (lambda m, k: m[k]) if isinstance(msg, dict) else getattr
+    def get(m, k):                # dicts, rclpy messages and flexmb_io.wire messages, mixed at any level
+        return m[k] if isinstance(m, dict) else getattr(m, k)
     if topic_kind == "commands":
         return runner.command_array(topic, list(get(msg, "data")))
     if topic_kind == "actuator_commands":

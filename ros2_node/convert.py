@@ -1,6 +1,9 @@
-"""Plain dicts (:mod:`flexmb_io.messages`) ↔ rclpy messages, by the messages' own introspection.
+"""rclpy message classes by type name, and rclpy messages ↔ plain dicts by their own introspection.
 
-Only the live node uses this (it imports rclpy-generated classes lazily, by type name).
+The node's outputs never pass through here: they are built once (:mod:`flexmb_io.messages`) and
+published as the bytes :mod:`flexmb_io.wire` serializes. The node needs the classes for its
+publishers and subscriptions, and :func:`to_dict` for the commands it receives; :func:`to_ros`
+gives an rclpy message of a :mod:`flexmb_io.messages` message or dict (tests, tools).
 """
 
 from __future__ import annotations
@@ -41,9 +44,12 @@ def _fields(cls) -> tuple[tuple[str, str], ...]:
     return tuple(cls.get_fields_and_field_types().items())
 
 
-def to_ros(type_name: str, d: dict):
-    """A new rclpy message of ``type_name`` filled from the dict ``d`` (missing keys keep defaults)."""
-    return fill(message_class(type_name)(), d)
+def to_ros(type_name: str, d):
+    """A new rclpy message of ``type_name`` filled from ``d``, a dict or a :mod:`flexmb_io.wire` message
+    (missing keys keep defaults)."""
+    from flexmb_io.wire import plain
+
+    return fill(message_class(type_name)(), plain(d))
 
 
 def fill(msg, d: dict):

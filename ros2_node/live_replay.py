@@ -178,7 +178,7 @@ def _publish_all(commands, inputs: dict, node_name: str, node, timeout: float) -
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from .convert import message_class, to_ros
+    from .convert import message_class
 
     ctx = Context()
     rclpy.init(context=ctx, domain_id=int(os.environ["ROS_DOMAIN_ID"]))
@@ -198,7 +198,7 @@ def _publish_all(commands, inputs: dict, node_name: str, node, timeout: float) -
                 raise FlexmbError("the twin node did not come up (no status, or it does not subscribe)")
             ex.spin_once(timeout_sec=0.05)
         for k, m in enumerate(commands, start=1):
-            pubs[m.topic].publish(to_ros(inputs[m.topic].type, obj_to_dict(m.decode())))
+            pubs[m.topic].publish(m.data)            # the recorded CDR bytes, as they were published
             t_end = time.monotonic() + timeout
             while steps[0] < k:
                 if node.poll() is not None or time.monotonic() > t_end:

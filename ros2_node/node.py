@@ -50,9 +50,9 @@ from flexmb_io import topics as T
 from flexmb_io.realtime import Samples, Snapshot, Stepper, StepperConfig
 from flexmb_io.shells import ShellShapes
 from flexmb_io.twin import RunnerOptions, TwinRunner
+from flexmb_io.wire import serialize
 
 from .convert import message_class, to_dict
-from .live_messages import LiveMessages
 from .params import SPECS, NodeParams
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
@@ -243,7 +243,6 @@ class TwinNode:
             self._names[topic.name] = pub.topic_name
         if self.p.diagnostics_rate > 0:
             self._diag = Diagnostics(self.node, out_qos, self.fq_name.lstrip("/"))
-        self.live = LiveMessages(self.runner.sample(), self.frames)
         if self.runner.schedule is not None:
             for topic, kind in _INPUTS:
                 cb = (lambda msg, _t=topic, _k=kind: self._on_command(_t, _k, msg))
@@ -281,7 +280,6 @@ class TwinNode:
         # ... and the executor's, for the answers to commands whose step it ran (Stepper.submit)
         self._answer_reporter = TwinReporter(self.model)
         self._answer_view = _SnapshotView(self.model, Workspace(self.model))
-        self._answer_live = LiveMessages(self.runner.sample(), self.frames)
         self._shells = ShellShapes(self.model)
         self._member_kinds = self.runner.member_kinds
 
@@ -428,26 +426,32 @@ class TwinNode:
         self._latencies.add(self._latency)
         # the publisher has not seen this command's event yet: its age counts from now on
         self._accepted_wall = max(self._accepted_wall, snap.cmd_recv_wall)
-        live = self._answer_live
         if self._listened.get(T.STATUS.name, True):
-            self._pub[T.STATUS.name].publish(live.fill_status(s, self._timing(snap, snap.message)))
+            status = M.status(s, self._timing(snap, snap.message), self.frames)
+            self._pub[T.STATUS.name].publish(serialize(T.STATUS.type, status))
         if self._listened.get(T.JOINT_STATES.name, True):
-            self._pub[T.JOINT_STATES.name].publish(live.fill_joint_state(s))
+            self._pub[T.JOINT_STATES.name].publish(serialize(T.JOINT_STATES.type, M.joint_state(s, self.frames)))
 
     # -- outputs (publisher thread) ------------------------------------------------------------------------
     def _wake_publisher(self) -> None:
         self._out_event.set()
 
-    def _out(self, topic: T.Topic, fill, make_dict, t: float) -> None:
-        """Publish ``fill()`` (a message filled by :class:`LiveMessages`, or None) when the topic has
-        subscribers, and record ``make_dict()`` (the same content, from :mod:`flexmb_io.messages`)."""
+    def _out(self, topic: T.Topic, build, t: float) -> None:
+        """Serialize ``build()`` (a :mod:`flexmb_io.messages` message) once, publish the bytes when the
+        topic has subscribers and record the same bytes (nothing is built for neither).
+
+        One form, one serialization (issue 14): the former path filled an rclpy message for the wire
+        and built a dict for the bag, serialized twice. Per publication (build + serialize +
+        publish + record, ``benchmarks/message_path.py``): see :mod:`flexmb_io.wire`."""
         pub = self._pub.get(topic.name)
-        if pub is not None and self._live and self._listened.get(topic.name, True):
-            msg = fill()
-            if msg is not None:
-                pub.publish(msg)
+        live = pub is not None and self._live and self._listened.get(topic.name, True)
+        if not live and self.recorder is None:
+            return
+        data = serialize(topic.type, build())
+        if live:
+            pub.publish(data)
         if self.recorder is not None:
-            self.recorder.write(self._resolved(topic), topic.type, make_dict(), t)
+            self.recorder.write_cdr(self._resolved(topic), topic.type, data, t)
 
     def _rtf(self) -> float:
         w = self._rtf_window
@@ -491,7 +495,7 @@ class TwinNode:
         if not s.is_finite():       # never publish NaN (the runner rolls such steps back already)
             self._warn("nan", f"non-finite output at t = {t:.6g} s withheld")
             return
-        live, frames = self.live, self.frames
+        frames = self.frames
         message = snap.message
         answer = snap.on_command and not snap.answered
         if answer:                  # the state that answers a command: its latency, measured here
@@ -503,21 +507,20 @@ class TwinNode:
         if snap.due or snap.on_command or snap.ack:
             # the status first: it echoes the command's stamp, the acknowledgement clients wait for
             timing = self._timing(snap, message)
-            self._out(T.STATUS, lambda: live.fill_status(s, timing), lambda: M.status(s, timing, frames), t)
+            self._out(T.STATUS, lambda: M.status(s, timing, frames), t)
         if snap.due or snap.on_command:
-            self._out(T.JOINT_STATES, lambda: live.fill_joint_state(s), lambda: M.joint_state(s, frames), t)
+            self._out(T.JOINT_STATES, lambda: M.joint_state(s, frames), t)
         self._live = live_now
         if snap.due:
-            self._out(T.ACTUATOR_STATES, lambda: live.fill_actuator_state(s), lambda: M.actuator_state(s, frames), t)
+            self._out(T.ACTUATOR_STATES, lambda: M.actuator_state(s, frames), t)
             for i, topic in enumerate(self._pose_topics):
-                self._out(topic, lambda i=i: live.fill_pose(s, i), lambda i=i: M.platform_pose(s, i, frames), t)
+                self._out(topic, lambda i=i: M.platform_pose(s, i, frames), t)
             if self._pose_topics:
-                self._out(T.TF, lambda: live.fill_tf(s) if live.tf_msg is not None else None,
-                          lambda: M.tf(s, frames), t)
+                self._out(T.TF, lambda: M.tf(s, frames), t)
             self._published += 1
         if snap.shape_due:
             kinds, shells = self._member_kinds, self._shells
-            self._out(T.SHAPE, lambda: live.fill_shape(s, kinds, shells), lambda: M.shape(s, kinds, shells, frames), t)
+            self._out(T.SHAPE, lambda: M.shape(s, kinds, shells, frames), t)
             if self.rerun is not None:
                 self.rerun.log_sample(s, {"step_wall_time": snap.step_wall, "real_time_factor": self._rtf(),
                                           "message": message}, shells)
@@ -547,7 +550,7 @@ class TwinNode:
                 continue
             if ev[0] == "clock":
                 self._live, t = i == newest_clock, ev[1]
-                self._out(T.CLOCK, lambda: self.live.fill_clock(t), lambda: M.clock(t), t)
+                self._out(T.CLOCK, lambda: M.clock(t), t)
                 continue
             snap = slots[ev[1]]
             if snap.seq != ev[2]:
@@ -619,29 +622,28 @@ class TwinNode:
         view.state = snap.state
         s = self._reporter.read(view, False)
         timing = self._timing(snap, "")
-        self._out(T.STATUS, lambda: self.live.fill_status(s, timing), lambda: M.status(s, timing, self.frames), s.t)
+        self._out(T.STATUS, lambda: M.status(s, timing, self.frames), s.t)
         if self.p.publish_clock:
-            self._out(T.CLOCK, lambda: self.live.fill_clock(s.t), lambda: M.clock(s.t), s.t)
+            self._out(T.CLOCK, lambda: M.clock(s.t), s.t)
 
     def _prime(self) -> None:
-        """Fill every output message once from the initial state (nothing is published or recorded):
-        the first publication then neither builds the shape's markers nor loads a kernel while the
-        stepping thread runs."""
+        """Build and serialize every output message once from the initial state (nothing is published
+        or recorded): the first publication then neither generates a serializer nor loads a kernel
+        while the stepping thread runs."""
         view = self._view
         view.state = self.runner.sim.state
         s = self._reporter.read(view, True)
         self._shells.read(view.state.q)
-        live, timing = self.live, M.StatusTiming()
-        live.fill_joint_state(s)
-        live.fill_status(s, timing)
-        live.fill_actuator_state(s)
-        for i in range(len(self._pose_topics)):
-            live.fill_pose(s, i)
-        if live.tf_msg is not None:
-            live.fill_tf(s)
-        live.fill_clock(s.t)
+        frames = self.frames
+        built = [(T.JOINT_STATES, M.joint_state(s, frames)), (T.STATUS, M.status(s, M.StatusTiming(), frames)),
+                 (T.ACTUATOR_STATES, M.actuator_state(s, frames)), (T.CLOCK, M.clock(s.t)),
+                 *((T.PLATFORM_POSE, M.platform_pose(s, i, frames)) for i in range(len(self._pose_topics)))]
+        if self._pose_topics:
+            built.append((T.TF, M.tf(s, frames)))
         if self.stepper.cfg.shape_every:
-            live.fill_shape(s, self._member_kinds, self._shells)
+            built.append((T.SHAPE, M.shape(s, self._member_kinds, self._shells, frames)))
+        for topic, msg in built:
+            serialize(topic.type, msg)
 
     # -- running ------------------------------------------------------------------------------------------
     def request_stop(self, *_args) -> None:

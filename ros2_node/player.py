@@ -27,8 +27,9 @@ import numpy as np
 from flexmb_core.errors import FlexmbError
 from flexmb_io import messages as M
 from flexmb_io import topics as T
+from flexmb_io.wire import serialize
 
-from .convert import message_class, to_ros
+from .convert import message_class
 
 
 # steps of wall time the realtime player extrapolates the twin's time beyond its last report
@@ -225,7 +226,7 @@ class Player:
         else:
             d = M.actuator_command(t_target, self.source.names, lengths, rates)
             self.sent[ns] = time.perf_counter()
-        self.pub.publish(to_ros(self.topic.type, d))
+        self.pub.publish(serialize(self.topic.type, d))
 
     def _wait_for_twin(self) -> None:
         t_end = time.monotonic() + self.timeout

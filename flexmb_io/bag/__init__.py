@@ -6,6 +6,6 @@
   tolerances in :mod:`.tolerances`)
 - :mod:`.reader` — truncation-tolerant reading and ``flexmb bag recover``; :mod:`.info` — ``flexmb bag info``
 - :mod:`.regenerate` — ``flexmb bag regenerate`` (``bags/manifest.yaml``)
-- :mod:`.writer`, :mod:`.rosbag2`, :mod:`.cdr`, :mod:`.schemas` — the file layout, ``metadata.yaml``,
-  the CDR encoder and the ``ros2msg`` schemas
+- :mod:`.writer`, :mod:`.rosbag2` — the file layout and ``metadata.yaml``; messages, their CDR bytes,
+  ``ros2msg`` schemas and type hashes come from :mod:`flexmb_io.wire` (rosbags' type store)
 """

@@ -71,8 +71,8 @@ class Comparison:
     def joint_states(self, topic: str, rec, s: TwinSample, t: float) -> None:
         ref = M.joint_state(s)
         names = list(rec.name)
-        if names != ref["name"]:
-            self.mismatch(f"{topic} t = {t:.9g} s: joint names {names} differ from the replay's {ref['name']}")
+        if names != ref.name:
+            self.mismatch(f"{topic} t = {t:.9g} s: joint names {names} differ from the replay's {ref.name}")
             return
         na = len(s.actuator_names)
         pos, vel, eff = np.asarray(rec.position), np.asarray(rec.velocity), np.asarray(rec.effort)
@@ -80,7 +80,7 @@ class Comparison:
             self.mismatch(f"{topic} t = {t:.9g} s: position/velocity/effort sizes {len(pos)}/{len(vel)}/{len(eff)} "
                           f"for {len(names)} names")
             return
-        rp, rv, re = np.asarray(ref["position"]), np.asarray(ref["velocity"]), np.asarray(ref["effort"])
+        rp, rv, re = np.asarray(ref.position), np.asarray(ref.velocity), np.asarray(ref.effort)
         if na:
             self._vec(topic, "position (actuators)", "length", pos[:na], rp[:na], names[:na], t)
             self._vec(topic, "effort", "force", eff[:na], re[:na], names[:na], t)
@@ -92,8 +92,8 @@ class Comparison:
     def actuator_states(self, topic: str, rec, s: TwinSample, t: float) -> None:
         ref = M.actuator_state(s)
         names = list(rec.names)
-        if names != ref["names"]:
-            self.mismatch(f"{topic} t = {t:.9g} s: actuator names {names} differ from the replay's {ref['names']}")
+        if names != ref.names:
+            self.mismatch(f"{topic} t = {t:.9g} s: actuator names {names} differ from the replay's {ref.names}")
             return
         for fname, kind in (("lengths", "length"), ("commanded_lengths", "length"), ("velocities", "velocity"),
                             ("axial_forces", "force")):
@@ -101,7 +101,7 @@ class Comparison:
             if a.size != len(names):
                 self.mismatch(f"{topic} t = {t:.9g} s: {fname} has {a.size} values for {len(names)} names")
                 continue
-            self._vec(topic, fname, kind, a, np.asarray(ref[fname]), names, t)
+            self._vec(topic, fname, kind, a, np.asarray(getattr(ref, fname)), names, t)
 
     def pose(self, topic: str, rec, s: TwinSample, index: int, t: float) -> None:
         p = s.poses[index]

@@ -31,10 +31,10 @@ from pathlib import Path
 from typing import Any
 
 from . import writer as _w
-from .cdr import compile_encoder
 from .defaults import CHUNK_MESSAGES, CHUNK_SECONDS
 from .rosbag2 import OfferedQos
 from .writer import BagError, BagWriter
+from ..wire import make, serializer
 
 SCENE_ATTACHMENT = "scene.yaml"
 METADATA_NAME = "flexmb"
@@ -125,7 +125,6 @@ class BagRecorder:
         self.metadata = meta
         self._bag.add_attachment(SCENE_ATTACHMENT, scene_text.encode("utf-8"), "application/yaml")
         self._bag.add_metadata(METADATA_NAME, meta)
-        self._encoders: dict[str, Any] = {}
         self._channels: dict[str, _w.Channel] = {}
 
     @staticmethod
@@ -150,7 +149,7 @@ class BagRecorder:
         return self._bag.messages
 
     def declare(self, topic: str, type_name: str) -> None:
-        """Register ``topic`` now (schema, channel, type hash, CDR encoder) instead of at its first
+        """Register ``topic`` now (schema, channel, type hash, serializer) instead of at its first
         message: the first use costs a few ms, which a 1 kHz loop should not pay mid-run.
 
         Raises
@@ -159,20 +158,20 @@ class BagRecorder:
             When the topic was recorded with another type.
         """
         self._channels[topic] = self._bag.channel(topic, type_name)
-        if type_name not in self._encoders:
-            self._encoders[type_name] = compile_encoder(type_name)
+        serializer(type_name)
 
-    def write(self, topic: str, type_name: str, msg: dict, t_sim: float) -> None:
-        """Record one message.
+    def write(self, topic: str, type_name: str, msg, t_sim: float) -> None:
+        """Record one message (serialized here; :meth:`write_cdr` records bytes already serialized).
 
         Parameters
         ----------
         topic
             Resolved topic name (``/flexmb_twin/status``, ``/joint_states``, …).
         type_name
-            ROS type ``pkg/msg/Type`` (its schema must be known to :mod:`flexmb_io.bag.schemas`).
+            ROS type ``pkg/msg/Type`` of :func:`flexmb_io.wire.typestore`.
         msg
-            The message as nested dicts/lists with the ROS field names (:mod:`flexmb_io.messages`).
+            The message: an object of :mod:`flexmb_io.messages` (:mod:`flexmb_io.wire`'s type store), or
+            nested dicts/lists with the ROS field names (missing fields are zero).
         t_sim
             Simulated time (s, ≥ 0): the message's log time and publish time, in ns.
 
@@ -182,15 +181,19 @@ class BagRecorder:
             When the recorder is closed, ``t_sim`` is negative or not finite, or the topic was
             recorded with another type.
         """
+        if isinstance(msg, dict):
+            msg = make(type_name, msg)
+        self.write_cdr(topic, type_name, serializer(type_name)(msg), t_sim)
+
+    def write_cdr(self, topic: str, type_name: str, data: bytes, t_sim: float) -> None:
+        """Record one message given as its CDR bytes (:func:`flexmb_io.wire.serialize`: what the node
+        published). Parameters and errors as :meth:`write`."""
         ch = self._channels.get(topic)
         if ch is None or ch.info.type != type_name:
             ch = self._channels[topic] = self._bag.channel(topic, type_name)
-        enc = self._encoders.get(type_name)
-        if enc is None:
-            enc = self._encoders[type_name] = compile_encoder(type_name)
         if not t_sim >= 0.0 or t_sim == float("inf"):
             raise BagError(f"{topic}: message time must be finite and ≥ 0 s (simulated time), got {t_sim}")
-        self._bag.write_cdr(ch, enc(msg), int(round(t_sim * 1e9)))
+        self._bag.write_cdr(ch, data, int(round(t_sim * 1e9)))
 
     def flush(self) -> None:
         """Close the open chunk and flush it to the OS now (also done every ``chunk_seconds``)."""

@@ -30,7 +30,6 @@ from flexmb_core.errors import FlexmbError
 
 from . import rosbag2
 from .rosbag2 import BagInfo, OfferedQos, TopicInfo
-from .schemas import schema_text
 
 
 class Channel:
@@ -188,7 +187,8 @@ class BagWriter:
     # -- messages -------------------------------------------------------------------------------
     def channel(self, topic: str, type_name: str, schema: str | None = None) -> Channel:
         """The channel of ``topic`` (registered on first use with the ``ros2msg`` schema of
-        ``type_name``, by default the one of :func:`~flexmb_io.bag.schemas.schema_text`).
+        ``type_name``, by default the one of :func:`flexmb_io.wire.schema`; a given ``schema``, e.g. a
+        recovered bag's own, is hashed as written).
 
         Raises
         ------
@@ -201,12 +201,14 @@ class BagWriter:
                 raise BagError(f"{self.path}: topic {topic} is recorded as {ch.info.type}, "
                                f"cannot also write {type_name} on it")
             return ch
-        text = schema if schema is not None else schema_text(type_name)
+        from .. import wire
+
+        text = schema if schema is not None else wire.schema(type_name)
         sid = self._schemas.get(type_name)
         if sid is None:
             sid = self._mcap.register_schema(type_name, "ros2msg", text.encode("utf-8"))
             self._schemas[type_name] = sid
-        digest = rosbag2.type_hash(type_name, text)
+        digest = rosbag2.type_hash(type_name, text) if schema is not None else wire.type_hash(type_name)
         # the channel metadata ros2 bag's MCAP storage writes (rosbags checks it against metadata.yaml)
         meta = {"offered_qos_profiles": rosbag2.qos_yaml(self.info.qos), "topic_type_hash": digest}
         cid = self._mcap.register_channel(topic=topic, message_encoding="cdr", schema_id=sid, metadata=meta)

@@ -13,7 +13,7 @@ from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_io import messages as M
 from flexmb_io import topics as T
-from flexmb_io.bag.cdr import compile_encoder
+from flexmb_io import wire
 from flexmb_io.bag.reader import BagReader
 from flexmb_io.bag.recorder import BagRecorder
 from flexmb_io.bag.replay import replay
@@ -94,7 +94,8 @@ def test_shell_shapes_gather_the_nodes_from_the_state(radiator):
 # --- scenes without shells: the same bytes as before -----------------------------------------
 def test_shape_of_a_scene_without_shells_is_byte_identical_to_the_reference_bag():
     """The first ``~/shape`` of ``bags/stewart_bars_appendix`` (recorded before shells existed),
-    re-made now, with the model's (empty) shells, encodes to the very same bytes."""
+    re-made now, with the model's (empty) shells, serializes (rosbags, :mod:`flexmb_io.wire`) to the
+    very same bytes as the former hand-written encoder wrote."""
     bag = ROOT / "bags" / "stewart_bars_appendix"
     topic = T.SHAPE.resolved()
     first = next(iter(BagReader(bag).messages({topic})))
@@ -104,8 +105,8 @@ def test_shape_of_a_scene_without_shells_is_byte_identical_to_the_reference_bag(
     s = runner.start()
     assert len(runner.shells) == 0
     d = M.shape(s, runner.member_kinds, runner.shells)
-    assert d == M.shape(s, runner.member_kinds)
-    assert compile_encoder(T.SHAPE.type)(d) == bytes(first.data)
+    assert wire.plain(d) == wire.plain(M.shape(s, runner.member_kinds))
+    assert wire.serialize(T.SHAPE.type, d) == bytes(first.data)
 
 
 # --- flexmb run --mcap and flexmb replay of a shell scene -------------------------------------
@@ -166,9 +167,9 @@ def test_replay_compares_the_shell_points(tmp_path, radiator):
             if k % 5 == 0:
                 d = M.shape(s, kinds, shells)
                 if k == 10:
-                    d["markers"][-1]["points"][7]["z"] += move
+                    d.markers[-1].points[7].z += move
                     if rename:
-                        d["markers"][-1]["ns"] = "panel3"
+                        d.markers[-1].ns = "panel3"
                 rec.write(T.SHAPE.resolved(), T.SHAPE.type, d, s.t)
         rec.close()
 

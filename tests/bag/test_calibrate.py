@@ -20,7 +20,7 @@ from flexmb_core.scene.overrides import OverrideError
 from flexmb_io import messages as M
 from flexmb_io import topics as T
 from flexmb_io.bag.calibrate import read_measurements, residuals, start_values
-from flexmb_io.bag.cdr import compile_encoder
+from flexmb_io import wire
 from flexmb_io.bag.reader import BagReader, recover
 from flexmb.cli import main
 
@@ -86,7 +86,7 @@ def add_noise(src: Path, dst: Path, seed: int = 1) -> None:
             q = Rotation.from_rotvec(NOISE["orientation"] * rng.standard_normal(3)) * \
                 Rotation.from_quat([o["x"], o["y"], o["z"], o["w"]])
             o["x"], o["y"], o["z"], o["w"] = (float(v) for v in q.as_quat())
-        return compile_encoder(type_name)(m)
+        return wire.serialize(type_name, wire.make(type_name, m))
 
     recover(src, dst, edit=edit)
 

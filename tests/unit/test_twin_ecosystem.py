@@ -172,7 +172,7 @@ def test_frames_prefix_the_platform_frames_only(stewart):
     s = r.start()
     frames = M.Frames(world="map", prefix="robot1/")
     tf = M.tf(s, frames)
-    assert [t["child_frame_id"] for t in tf["transforms"]] == ["robot1/platform"]
-    assert {t["header"]["frame_id"] for t in tf["transforms"]} == {"map"}
-    assert M.platform_pose(s, 0, frames)["header"]["frame_id"] == "map"
-    assert M.joint_state(s)["header"]["frame_id"] == "world"      # the default is unchanged
+    assert [t.child_frame_id for t in tf.transforms] == ["robot1/platform"]
+    assert {t.header.frame_id for t in tf.transforms} == {"map"}
+    assert M.platform_pose(s, 0, frames).header.frame_id == "map"
+    assert M.joint_state(s).header.frame_id == "world"      # the default is unchanged

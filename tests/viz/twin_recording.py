@@ -1,7 +1,7 @@
 """Write a twin recording (ROS 2 MCAP, the live node's topics) from an offline simulation.
 
-A test fixture until ``flexmb_io.bag.recorder`` lands: the same message dicts
-(``flexmb_io.messages``) and schemas (``flexmb_io.bag.schemas``) the recorder uses, the scene as
+A test fixture until ``flexmb_io.bag.recorder`` lands: the same messages
+(``flexmb_io.messages``) and schemas (``flexmb_io.wire``) the recorder uses, the scene as
 the attachment ``scene.yaml`` and a ``flexmb`` metadata record. Log times are a wall-clock-like
 epoch, unlike the header stamps (simulated time), so a reader that used log times would be caught.
 
@@ -21,7 +21,7 @@ from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
 from flexmb_core.simulator import Simulator
 from flexmb_io import messages, topics
-from flexmb_io.bag.schemas import schema_text
+from flexmb_io import wire
 from flexmb_io.shells import ShellShapes
 
 LOG_EPOCH_NS = 1_700_000_000_000_000_000      # log times start here (s since 1970: 2023-11-14)
@@ -68,12 +68,12 @@ def write_recording(scene_path: str | Path, out: str | Path, *, until: float, ev
         writer = Writer(stream, chunk_size=chunk_size)
         schemas = {}
         for typ in set(types.values()):
-            schemas[typ] = writer.register_msgdef(typ, schema_text(typ))
+            schemas[typ] = writer.register_msgdef(typ, wire.schema(typ))
         seq = [0]
 
         def put(topic: str, msg: dict) -> None:
             log_ns = LOG_EPOCH_NS + 1_000_000 * seq[0] + 137      # not the stamp, on purpose
-            writer.write_message(topic, schemas[types[topic]], msg, log_time=log_ns, publish_time=log_ns)
+            writer.write_message(topic, schemas[types[topic]], wire.plain(msg), log_time=log_ns, publish_time=log_ns)
             counts[topic] += 1
 
         timing = messages.StatusTiming()
