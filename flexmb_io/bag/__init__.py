@@ -1,6 +1,6 @@
 """Recording, reading and replaying rosbag2-compatible MCAP (no rclpy needed).
 
-- :mod:`.recorder` — :class:`~.recorder.BagRecorder`: the twin's messages (dicts) → a bag
+- :mod:`.recorder` — :class:`~.recorder.BagRecorder`: the twin's messages (or their CDR bytes) → a bag
 - :mod:`.run_hook` — ``flexmb run SCENE --mcap OUT``
 - :mod:`.replay` — ``flexmb replay BAG``: lockstep re-run and per-field comparison (:mod:`.compare`,
   tolerances in :mod:`.tolerances`)

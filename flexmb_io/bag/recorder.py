@@ -1,7 +1,7 @@
 """Record the twin to a rosbag2 directory with one ROS 2 MCAP file (no rclpy needed).
 
 ``flexmb node --mcap`` and ``flexmb run --mcap`` both write through :class:`BagRecorder`, with the
-topic names and types of :mod:`flexmb_io.topics` and the message dicts of
+topic names and types of :mod:`flexmb_io.topics` and the messages of
 :mod:`flexmb_io.messages`, so their bags are interchangeable. The bag runs on simulated time:
 every message's log time and publish time is the twin's simulated time in ns.
 

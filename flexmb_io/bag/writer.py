@@ -1,7 +1,7 @@
 """A rosbag2 directory holding one chunked, compressed ROS 2 MCAP file (already-encoded messages).
 
 :class:`BagWriter` owns the file layout and crash safety; :class:`~flexmb_io.bag.recorder.BagRecorder`
-(messages as dicts) and :func:`~flexmb_io.bag.reader.recover` (raw records) write through it.
+(messages or their CDR bytes) and :func:`~flexmb_io.bag.reader.recover` (raw records) write through it.
 
 Crash safety: a chunk is closed and the file flushed to the operating system every
 ``chunk_seconds`` of message time, every ``chunk_messages`` messages, or when the chunk exceeds
