@@ -37,22 +37,6 @@ START = tuple(v * f for v, f in zip(TRUTH, (0.8, 1.2, 0.8)))      # 20 % off
 NOISE = {"lengths": 5e-7, "axial_forces": 40.0, "velocities": 1e-3, "position": 1e-6, "orientation": 1e-6}
 
 
-@pytest.fixture(scope="module")
-def client():
-    """Two worker processes, one thread each, on 127.0.0.1 (what `flexmb calibrate --workers 2` starts)."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def _scene_with(values) -> str:
     text = RIG.read_text(encoding="utf-8")
     old = ("steel: {E: 210.0e9, nu: 0.3, rho: 7850.0, eta: 2.75e6}", "payload_a: {node: A, mass: 3.3333333333}")

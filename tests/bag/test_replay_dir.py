@@ -24,22 +24,6 @@ BAG = ROOT / "bags" / "boom_step"            # 0.4 s, replays in about a second
 LOOSE = {k: 1e3 for k in ("length", "position", "angle", "velocity", "force", "energy", "converged")}
 
 
-@pytest.fixture(scope="module")
-def client():
-    """Two worker processes, one thread each, on 127.0.0.1 (what `flexmb replay DIR --workers 2` starts)."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def _set(tmp_path, names, manifest: dict | None):
     d = tmp_path / "set"
     for n in names:

@@ -25,22 +25,6 @@ DETERMINISTIC = ("case", "family", "dt", "steps", "completed", "t_reached_s", "n
                  "substepped_steps", "error", "error_final", "error_closed_form", "error_orientation_rad")
 
 
-@pytest.fixture(scope="module")
-def client():
-    """Two worker processes, one thread each, on 127.0.0.1 (what `flexmb bench --workers 2` starts)."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def _nan(x) -> bool:
     return isinstance(x, float) and math.isnan(x)
 

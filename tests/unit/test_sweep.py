@@ -30,22 +30,6 @@ E_VALUES = ("2.0e11", "2.1e11", "2.2e11")
 MASSES = ("3.0", "4.0", "5.0")
 
 
-@pytest.fixture(scope="module")
-def client():
-    """Two worker processes, one thread each, on 127.0.0.1 (what `flexmb sweep --workers 2` starts)."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def _flat_outputs(outputs: dict) -> dict:
     return dict(leaf for name, v in outputs.items() for leaf in flatten(name, v))
 

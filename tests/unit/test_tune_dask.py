@@ -25,22 +25,6 @@ pytest.importorskip("distributed")
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "actuator_arm.yaml"
 
 
-@pytest.fixture(scope="module")
-def client():
-    """Two worker processes, one thread each, on 127.0.0.1 (what `flexmb tune --workers 2` starts)."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
-    c = Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def modelled_cost(job: Job) -> Measured:
     """``measure(job)`` with its times replaced by a deterministic model of the cost: steps × 1.8 for
     full Newton × 1.5 for a frame (not bar) actuator, 10 µs a unit — the same wherever it runs."""
