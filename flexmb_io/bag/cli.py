@@ -59,6 +59,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     report = replay(args.bag, tolerances=_flatten(args.tolerance), scene_path=args.scene,
                     overrides=_flatten(args.override))
+    return _emit(report, args)
+
+
+def _emit(report, args: argparse.Namespace) -> int:
+    """Write ``--json``, print the report (unless ``--quiet`` and all is well); the exit code."""
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
@@ -77,12 +82,7 @@ def _replay_dir(args: argparse.Namespace) -> int:
     report = replay_dir(args.bag, tolerances=_flatten(args.tolerance), scene_path=args.scene,
                         overrides=_flatten(args.override), scheduler=args.scheduler, workers=args.workers,
                         on_result=finished)
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
-    if not args.quiet or not report.ok:
-        print(report.format())
-    return report.exit_code
+    return _emit(report, args)
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
