@@ -11,12 +11,15 @@ the command schedule evaluated at ``t_n + Δt``. A recording stores each command
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexmb_core.errors import ConvergenceError, FlexmbError
+from flexmb_core.faults import FaultMonitor
 from flexmb_core.model.model import Model
+from flexmb_core.observers import actuator_forces
 from flexmb_core.report import TwinReporter, TwinSample
 from flexmb_core.scene.schema import SolverSpec
 from flexmb_core.simulator import Simulator
@@ -24,6 +27,8 @@ from flexmb_core.simulator import Simulator
 from .commands import HOLDS, SIZE, CommandSchedule, Rejection
 from .messages import stamp_seconds
 from .shells import ShellShapes
+
+_NO_FORCES = np.zeros(0)
 
 
 @dataclass
@@ -86,6 +91,8 @@ class RunnerCounters:
     substepped_steps: int = 0
     last_message: str = ""
     rejections: dict = field(default_factory=dict)   # kind → count
+    faults: dict = field(default_factory=dict)       # flexmb_core.faults kind → steps that showed it
+    stopped: str = ""              # why the twin stopped stepping (limits.on_violation: stop), "" if it did not
 
 
 class TwinRunner:
@@ -106,6 +113,7 @@ class TwinRunner:
                               f"'{self.sim.spec.analysis}'")
         self.dt = float(self.sim.spec.dt)
         self.reporter = TwinReporter(model)
+        self.faults = FaultMonitor(model)
         self.counters = RunnerCounters()
         self.schedule: CommandSchedule | None = None
         self._backup = None
@@ -206,6 +214,8 @@ class TwinRunner:
     def step(self) -> StepOutcome:
         """Advance one Δt on the commands in force (see the module's timing rule)."""
         sim, c = self.sim, self.counters
+        if c.stopped:
+            return StepOutcome(False, True, c.stopped)
         c.steps += 1
         t_new = sim.state.t + self.dt
         if self.schedule is not None:
@@ -232,9 +242,33 @@ class TwinRunner:
             c.failed_steps += 1
             c.last_message = f"step to t = {t_new:.6g} s produced non-finite values; state kept at t = {sim.state.t:.6g} s"
             return StepOutcome(False, False, c.last_message)
+        if self.faults.active:
+            fault = self._check_faults(t_new)
+            if fault is not None:
+                return fault
         if message:
             c.last_message = message
         return StepOutcome(True, converged, message)
+
+    def _check_faults(self, t_new: float) -> StepOutcome | None:
+        """The scene's ``limits:`` on the new state (flexmb_core.faults): None when all is well;
+        else the outcome to report — stepping on (``report``) or rolled back and stopped (``stop``)."""
+        sim, c = self.sim, self.counters
+        forces = actuator_forces(self.model, sim.ws, sim.state) if self.faults.max_force < math.inf else _NO_FORCES
+        found = self.faults.check(sim.state.q, forces)
+        if not found:
+            return None
+        for f in found:
+            c.faults[f.kind] = c.faults.get(f.kind, 0) + 1
+        text = "; ".join(f.detail for f in found)
+        if self.faults.stop:
+            sim.state.assign(self._backup)
+            c.stopped = (f"stopped at t = {sim.state.t:.6g} s (limits.on_violation: stop) — the step to "
+                         f"t = {t_new:.6g} s was rolled back: {text}")
+            c.last_message = c.stopped
+            return StepOutcome(False, True, c.stopped)
+        c.last_message = f"limits violated at t = {t_new:.6g} s: {text}"
+        return StepOutcome(True, True, c.last_message)
 
     def sample(self, full: bool = True) -> TwinSample:
         """The current state as a :class:`TwinSample` (the same object every call); see

@@ -706,6 +706,7 @@ class TwinNode:
             "failed_steps": c.failed_steps, "flagged_steps": c.flagged_steps, "substepped_steps": c.substepped_steps,
             "commands_accepted": self.runner.schedule.accepted if self.runner.schedule else 0,
             "commands_rejected": dict(c.rejections), "published_states": self._published,
+            "faults": dict(c.faults), "stopped": c.stopped,
             "cpu_time_s": self._cpu_times(wall),
             "record": self.p.record, "rrd": self.p.rrd, "interrupted": self.interrupted,
         }
@@ -796,7 +797,10 @@ class Diagnostics:
         cmds = entry("commands", warn if rej else ok, f"{sum(rej.values())} rejected" if rej else "all accepted",
                      [("accepted", twin.runner.schedule.accepted if twin.runner.schedule else 0),
                       ("latency_s", twin._latency)] + [(f"rejected_{k}", v) for k, v in sorted(rej.items())])
-        msg = DiagnosticArray(status=[solver, timing, cmds])
+        level = error if c.stopped else (warn if c.faults else ok)
+        limits = entry("limits", level, c.stopped or (c.last_message if c.faults else "within the scene's limits"),
+                       [(f"faults_{k}", v) for k, v in sorted(c.faults.items())] + [("stopped", bool(c.stopped))])
+        msg = DiagnosticArray(status=[solver, timing, cmds, limits])
         now = twin.node.get_clock().now().to_msg()
         msg.header.stamp = now
         self._pub.publish(msg)

@@ -14,7 +14,7 @@ from .limits import DEFAULT_LIMITS, Limits, over_limit
 from .reader import Node
 from .schema import (ActuatorSpec, CommandProgramSpec, Force, Joint, Gravity, MassOverride, Material, Member, Moment,
                      Output, PointMass, Scene, SectionSpec, ServoSpec, Signal, SolverSpec, Support)
-from .schema import ArcLengthSpec, DisplacementControlSpec, DofComponent, PathStepSpec
+from .schema import ArcLengthSpec, DisplacementControlSpec, DofComponent, PathStepSpec, PhysicalLimits
 from .include import compose
 from .shells import axis_normal, edge_ref, parse_edge_loads, parse_edge_support, parse_shell_joint, parse_shells, place_points
 
@@ -71,7 +71,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     data = compose(data, source, limits)
     root = Node(data, "", source).mapping(
         {"name", "description", "materials", "sections", "nodes", "members", "supports", "loads",
-         "point_masses", "damping", "solver", "outputs", "commands", "joints", "shells"},
+         "point_masses", "damping", "solver", "outputs", "commands", "joints", "shells", "limits"},
         {"name", "materials"})
     name = root.get("name").string()
     description = root.get("description", "").value
@@ -114,9 +114,17 @@ def scene_from_dict(data: Any, source: str = "<dict>",
                    if not (isinstance(n.value, dict) and n.value.get("type") in shell_types))
     shell_joints = tuple(parse_shell_joint(n, nodes, members, shells) for n in joint_nodes
                          if isinstance(n.value, dict) and n.value.get("type") in shell_types)
+    limits = _physical_limits(root.get("limits")) if root.has("limits") else None
     return Scene(name, description, source, materials, sections, nodes, members, supports, forces,
                  moments, pmasses, gravity, c_m, solver, outputs, commands, joints, shells, shell_joints,
-                 edge_loads, tuple(points.values()))
+                 edge_loads, tuple(points.values()), limits)
+
+
+def _physical_limits(n: Node) -> PhysicalLimits:
+    n.mapping({"max_actuator_force", "singular_configurations", "on_violation"}, set())
+    force = n.get("max_actuator_force").number(positive=True, unit="N") if n.has("max_actuator_force") else math.inf
+    return PhysicalLimits(force, n.get("singular_configurations", "detect").string(("detect", "ignore")),
+                          n.get("on_violation", "report").string(("report", "stop")))
 
 
 def _joint(n: Node, nodes, members) -> Joint:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 Vec3 = tuple[float, float, float]
@@ -372,6 +374,22 @@ class CommandProgramSpec:
 
 
 @dataclass(frozen=True)
+class PhysicalLimits:
+    """The scene's ``limits:`` (issue 15; :mod:`flexmb_core.faults`): what a twin's state must not do.
+
+    ``max_actuator_force`` (N, |axial force| of any actuator; inf: no bound),
+    ``singular_configurations``: ``detect`` (a platform_pose with six legs that passes through a
+    singular configuration into another assembly mode is a fault) or ``ignore``;
+    ``on_violation``: ``report`` (status, /diagnostics, the recording; stepping goes on) or ``stop``
+    (the violating step is rolled back and the twin stops stepping, holding its last good state).
+    """
+
+    max_actuator_force: float = math.inf
+    singular_configurations: str = "detect"
+    on_violation: str = "report"
+
+
+@dataclass(frozen=True)
 class Scene:
     """A whole mechanism: what the compiler turns into a :class:`~flexmb_core.model.Model`."""
 
@@ -396,3 +414,4 @@ class Scene:
     shell_joints: tuple[ShellJoint, ...] = ()
     edge_loads: tuple[EdgeLoad, ...] = ()
     shell_points: tuple[ShellPoint, ...] = ()    # mesh nodes named by coordinates (named or in place)
+    limits: PhysicalLimits | None = None         # the scene's ``limits:`` (None: defaults)

@@ -57,10 +57,20 @@ def _curved_element(h=0.02, radius=0.5):
     return q0, (phi, dphi, zeta, a0inv, w, np.array([LAM, MU, h])), x
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    b = np.ascontiguousarray(a, dtype=float)
+    if b is a:
+        b = a.copy()
+    b.setflags(write=False)
+    return b
+
+
 def _eval(q, geo, want_k=True):
     sc = shell_scratch()
     dv, dfa, f, bm, cb, _, re, ke = sc
-    u = shell_element(q, *geo, want_k, dv, dfa, f, bm, cb, re, ke)
+    # the compiled model's geometry arrays are read-only: call the kernel with the same signature
+    # (tests/unit/test_signatures.py: one signature per kernel in one process)
+    u = shell_element(q, *(_frozen(g) for g in geo), want_k, dv, dfa, f, bm, cb, re, ke)
     return u, re.copy(), ke.copy()
 
 
