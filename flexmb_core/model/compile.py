@@ -10,15 +10,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import sections as secmod
-from ..errors import SceneError, excerpt, name_list, thousands
+from ..errors import SceneError
 from ..scene.limits import Limits, check_size
-from ..scene.schema import Member, Scene, Signal
+from ..scene.schema import Scene, Signal
 from ..servo import ServoParams
 from .frame_geometry import frame_member_geometry, frame_member_mass
-from .model import Actuators, Drives, FrameGroup, MemberInfo, Model, MomentLoads, TrussGroup
-from .shell_compile import (build_shell_groups, clamp_node_gdofs, compact_drafts, edge_load_patterns,
-                            edge_support_dofs, number_shell_nodes, shell_element_pairs, shell_infos,
-                            shell_point_node)
+from .model import Actuators, Drives, FrameGroup, Model, MomentLoads, TrussGroup
+from .dof_numbering import _axis_offset, _unit, member_geometry, number_dofs
+from .shell_compile import (build_shell_groups, clamp_node_gdofs, edge_load_patterns, edge_support_dofs,
+                            shell_element_pairs, shell_point_node)
+
+__all__ = ["compile_scene", "member_geometry"]
 
 
 def _freeze(*arrays: np.ndarray) -> None:
@@ -26,196 +28,17 @@ def _freeze(*arrays: np.ndarray) -> None:
         a.setflags(write=False)
 
 
-def _unit(v) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    return v / np.linalg.norm(v)
-
-
-def member_geometry(mem: Member, nodes: dict, source: str = "<scene>"
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Reference node positions, tangents and section vectors along a member.
-
-    Returns ``x (m, 3)``, ``t (m, 3)``, ``v1 (m, 3)``, ``v2 (m, 3)`` with m = elements·order + 1.
-    ``V2`` is ``up`` made orthogonal to the tangent (default: global z, or x for members within
-    8° of vertical); ``V1 = V2 × t`` so that (t, V1, V2) is right-handed.
-    """
-    a = np.asarray(nodes[mem.start], dtype=float)
-    b = np.asarray(nodes[mem.end], dtype=float)
-    m = mem.elements * mem.order + 1
-    s = np.linspace(0.0, 1.0, m)
-    if mem.arc_center is None:
-        x = a + s[:, None] * (b - a)
-        t = np.tile(_unit(b - a), (m, 1))
-    else:
-        c = np.asarray(mem.arc_center, dtype=float)
-        ra, rb = a - c, b - c
-        radius = np.linalg.norm(ra)
-        normal = np.cross(ra, rb)
-        if np.linalg.norm(normal) < 1e-12 * radius**2:
-            raise SceneError(f"{source}:members.{mem.name}.arc", "arc from/to are collinear with the centre (180° or 0° arc): ambiguous plane")
-        normal = _unit(normal)
-        angle = math.atan2(np.linalg.norm(np.cross(ra, rb)), ra @ rb)
-        e1 = ra / radius
-        e2 = np.cross(normal, e1)
-        phi = s * angle
-        x = c + radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
-        t = -np.sin(phi)[:, None] * e1 + np.cos(phi)[:, None] * e2
-    # every node at once (a 10⁵-element scene has 3·10⁵ of them)
-    if mem.up is not None:
-        up = np.broadcast_to(np.asarray(mem.up, dtype=float), t.shape)
-    else:
-        steep = np.abs(t[:, 2]) >= math.cos(math.radians(8))
-        up = np.where(steep[:, None], np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]))
-    u = up - np.einsum("ij,ij->i", up, t)[:, None] * t
-    norm_u = np.sqrt(np.einsum("ij,ij->i", u, u))
-    norm_up = np.sqrt(np.einsum("ij,ij->i", up, up))
-    flat = norm_u < 1e-9 * norm_up
-    if flat.any():
-        raise SceneError(f"{source}:members.{mem.name}.up",
-                         f"'up' {excerpt(up[int(np.argmax(flat))].tolist())} is parallel to the member axis")
-    v2 = u / norm_u[:, None]
-    v1 = np.cross(v2, t)
-    return x, t, v1, v2
-
-
-def _number_member_dofs(ids: np.ndarray, ydof: list, node_x: list, x: np.ndarray, v1: np.ndarray,
-                        v2: np.ndarray, is_frame: bool, take) -> tuple[np.ndarray, np.ndarray]:
-    """DOFs of a member's nodes, node after node: the position (3, if the node has none yet) then,
-    for frames, the two section vectors (6) — the numbering of a per-node loop, done in one pass.
-
-    ``ydof`` (node → first position DOF or −1) is updated in place; ``take(values, kinds)`` appends
-    the reference values and their kinds (0 position, 1 vector) and returns the first new DOF.
-    Returns ``yd (m, 3)`` and ``vd (m, 6)`` (−1 for bars).
-    """
-    m = ids.size
-    new_y = np.fromiter((ydof[n] < 0 for n in ids.tolist()), dtype=bool, count=m)
-    per_node = 3 * new_y + (6 if is_frame else 0)
-    block = np.concatenate((x, v1, v2), axis=1)                  # (m, 9) reference values
-    for k in np.flatnonzero(new_y).tolist():
-        block[k, :3] = node_x[ids[k]]                             # a scene node keeps its own coordinates
-    mask = np.zeros((m, 9), dtype=bool)
-    mask[:, :3] = new_y[:, None]
-    mask[:, 3:] = is_frame
-    kinds = np.broadcast_to(np.array([0, 0, 0, 1, 1, 1, 1, 1, 1]), (m, 9))
-    base = take(block[mask], kinds[mask])
-    starts = base + np.concatenate(([0], np.cumsum(per_node)[:-1]))
-    for k in np.flatnonzero(new_y).tolist():
-        ydof[ids[k]] = int(starts[k])
-    yd = np.fromiter((ydof[n] for n in ids.tolist()), dtype=np.int64, count=m)[:, None] + np.arange(3)
-    vd = np.full((m, 6), -1, dtype=np.int64)
-    if is_frame:
-        vd[:] = (starts + 3 * new_y)[:, None] + np.arange(6)
-    return yd, vd
-
-
-def member_length(x: np.ndarray) -> float:
-    """Polyline length through the member's nodes (m)."""
-    return float(np.sum(np.linalg.norm(np.diff(x, axis=0), axis=1)))
-
-
 def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
     """Build the read-only :class:`Model` of a validated scene; a :class:`SceneError` first if the
     scene exceeds ``limits`` (elements, DOFs: :func:`~flexmb_core.scene.limits.check_size`)."""
     check_size(scene, limits)
     mats = scene.materials
-    secs: dict[str, secmod.SectionProperties] = {}
-    for name, spec in scene.sections.items():
-        used_nu = [mats[m.material].nu for m in scene.members.values() if m.section == name]
-        nu = used_nu[0] if used_nu else 0.0
-        if spec.shape == "rectangle":
-            p = secmod.rectangle(*spec.dims, nu)
-        elif spec.shape == "circle":
-            p = secmod.circle(*spec.dims, nu)
-        else:
-            p = secmod.tube(*spec.dims, nu)
-        secs[name] = secmod.with_overrides(p, spec.torsion_constant, spec.shear_factor)
-
-    node_names = list(scene.nodes)
-    node_x = [np.asarray(scene.nodes[n], dtype=float) for n in node_names]
-    node_lookup = {n: i for i, n in enumerate(node_names)}
-    ydof = [-1] * len(node_names)
-    ndof = 0
-    q0: list[float] = []
-    scale_kind: list[int] = []  # 0 position, 1 vector
-
-    def take(values, kind):
-        """Append reference values (their kind: 0 position, 1 vector; one for all or one each)."""
-        nonlocal ndof
-        start = ndof
-        values = np.asarray(values, dtype=float).ravel()
-        q0.extend(values.tolist())
-        scale_kind.extend(np.broadcast_to(np.asarray(kind), values.shape).tolist())
-        ndof += values.size
-        return start
-
-    member_infos: list[MemberInfo] = []
-    member_geom = {}
-    for mem in scene.members.values():
-        x, t, v1, v2 = member_geometry(mem, scene.nodes, scene.source)
-        member_geom[mem.name] = (x, t, v1, v2)
-        m = x.shape[0]
-        ids = np.empty(m, dtype=np.int64)
-        ids[0], ids[-1] = node_lookup[mem.start], node_lookup[mem.end]
-        via_at = {}
-        for v in mem.via:
-            dist = np.linalg.norm(x - np.asarray(scene.nodes[v]), axis=1)
-            k = int(np.argmin(dist))
-            if dist[k] > 1e-9 * member_length(x) or k in (0, m - 1):
-                raise SceneError(f"{scene.source}:members.{mem.name}.via",
-                                 f"node '{v}' is not at an interior element node of the member (closest "
-                                 f"node {dist[k]:.3g} m away); choose 'elements' so that an element "
-                                 "boundary falls on it")
-            via_at[k] = node_lookup[v]
-        for k, n in via_at.items():
-            ids[k] = n
-        interior = [k for k in range(1, m - 1) if k not in via_at]
-        names = [f"{mem.name}/{k}" for k in interior]
-        clash = node_lookup.keys() & set(names)
-        if clash:
-            name = min(clash, key=lambda c: int(c.rsplit("/", 1)[1]))
-            k = int(name.rsplit("/", 1)[1])
-            raise SceneError(f"{scene.source}:nodes.{name}", f"the name '{name}' is taken by interior node {k} "
-                             f"of member '{mem.name}'; rename the scene node (names 'member/k' are generated)")
-        first = len(node_names)
-        node_lookup.update(zip(names, range(first, first + len(names))))
-        node_names.extend(names)
-        node_x.extend(x[interior])
-        ydof.extend([-1] * len(names))
-        ids[interior] = np.arange(first, first + len(names))
-        is_frame = mem.kind == "frame" or (mem.kind == "actuator" and mem.actuator.variant == "frame")
-        yd, vd = _number_member_dofs(ids, ydof, node_x, x, v1, v2, is_frame, take)
-        if mem.kind == "actuator" and mem.arc_center is not None:
-            raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
-        member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
-    drafts = number_shell_nodes(scene, node_lookup, node_names, node_x, ydof,
-                                {mi.name: mi.nodes for mi in member_infos}, take)
-    corners: list[tuple[str, str, str]] = []
-    hinges: list[tuple[str, str, str, tuple]] = []
-    if scene.joints:
-        remap = _joint_dof_map(scene, ndof, member_infos, member_geom, node_lookup, corners, hinges)
-        keep = np.unique(remap)
-        q0 = [q0[i] for i in keep]
-        scale_kind = [scale_kind[i] for i in keep]
-        ndof = keep.size
-        compact = np.searchsorted(keep, remap)
-        ydof = [int(compact[y]) if y >= 0 else -1 for y in ydof]
-        member_infos = [MemberInfo(mi.name, mi.kind, mi.nodes, compact[mi.ydofs],
-                                   np.where(mi.vdofs >= 0, compact[np.maximum(mi.vdofs, 0)], -1), mi.length)
-                        for mi in member_infos]
-        compact_drafts(drafts, compact)
-    unused = [n for i, n in enumerate(scene.nodes) if ydof[i] < 0]
-    if unused:
-        raise SceneError(f"{scene.source}:nodes", f"node(s) {name_list(unused)} are not used by any member or shell "
-                                                  f"({thousands(len(unused))} in all)")
-
-    q0_arr = np.asarray(q0, dtype=float)
-    nodes_xyz = np.asarray(node_x)
-    l_char = max(float(np.linalg.norm(nodes_xyz.max(0) - nodes_xyz.min(0))),
-                 max((mi.length for mi in member_infos), default=0.0))
-    dof_scale = np.where(np.asarray(scale_kind) == 0, l_char, 1.0)
-    node_ydofs = np.asarray(ydof, dtype=np.int64)[:, None] + np.arange(3)
-    member_lookup = {mi.name: i for i, mi in enumerate(member_infos)}
-    shells = shell_infos(drafts, node_ydofs)
+    secs = _sections(scene)
+    dofs = number_dofs(scene)
+    ndof, q0, q0_arr, dof_scale = dofs.ndof, dofs.q0, dofs.q0_array, dofs.dof_scale
+    node_names, node_x, node_lookup, node_ydofs = dofs.node_names, dofs.node_x, dofs.node_lookup, dofs.node_ydofs
+    member_infos, member_geom, member_lookup = dofs.member_infos, dofs.member_geom, dofs.member_lookup
+    shells, corners, hinges = dofs.shells, dofs.corners, dofs.hinges
 
     # -- prescribed DOFs ------------------------------------------------------------------
     fixed = np.zeros(ndof, dtype=bool)
@@ -533,6 +356,24 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
                  *hinge_arrays, node_lookup, member_lookup, shell_groups, shells, *tie_arrays)
 
 
+def _sections(scene: Scene) -> dict[str, secmod.SectionProperties]:
+    """Section properties per section name (SI: m², m⁴), with the Poisson ratio of the first
+    member's material that uses the section (0 if none does) for the shear factor."""
+    mats = scene.materials
+    secs: dict[str, secmod.SectionProperties] = {}
+    for name, spec in scene.sections.items():
+        used_nu = [mats[m.material].nu for m in scene.members.values() if m.section == name]
+        nu = used_nu[0] if used_nu else 0.0
+        if spec.shape == "rectangle":
+            p = secmod.rectangle(*spec.dims, nu)
+        elif spec.shape == "circle":
+            p = secmod.circle(*spec.dims, nu)
+        else:
+            p = secmod.tube(*spec.dims, nu)
+        secs[name] = secmod.with_overrides(p, spec.torsion_constant, spec.shear_factor)
+    return secs
+
+
 def _servo_params(scene: Scene, act_names: list[str], act_stroke: np.ndarray) -> ServoParams | None:
     """The declared servos as arrays (:mod:`flexmb_core.servo`); None when no actuator has one."""
     specs = [(i, scene.members[n].actuator.servo) for i, n in enumerate(act_names)
@@ -563,73 +404,6 @@ def _member_geometry(where: str, *args, **kw):
         return frame_member_geometry(*args, **kw)
     except ValueError as exc:
         raise SceneError(where, str(exc)) from None
-
-
-def _axis_offset(where: str, member: str, node: str, v1: np.ndarray, v2: np.ndarray, axis: np.ndarray) -> int:
-    """0 if V1 lies on ``axis``, 3 if V2 does (same sense); otherwise a SceneError with a hint."""
-    for off, v in ((0, v1), (3, v2)):
-        if v @ axis > 1.0 - 1e-9:
-            return off
-    raise SceneError(where, f"member '{member}' has no section vector along the axis {axis.tolist()} at node "
-                            f"'{node}' (V1 = {np.round(v1, 6).tolist()}, V2 = {np.round(v2, 6).tolist()}); "
-                            "set the member's 'up' to the axis so that V2 lies on it")
-
-
-def _joint_dof_map(scene: Scene, ndof: int, member_infos, member_geom, node_lookup, corners: list,
-                   hinges: list) -> np.ndarray:
-    """For every DOF, the DOF it is merged into by the scene's joints (union–find roots).
-
-    Rigid joints between members with different section frames cannot be expressed by sharing;
-    they are appended to ``corners`` as (member a, member b, node) for Lagrange multipliers;
-    revolute joints whose axis is not a section vector of every member go to ``hinges``.
-    """
-    parent = np.arange(ndof)
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    infos = {mi.name: mi for mi in member_infos}
-    for j_idx, j in enumerate(scene.joints):
-        where = f"{scene.source}:joints[{j_idx}]"
-        if j.type == "spherical":
-            continue                                   # shared nodes already share positions
-        n = node_lookup[j.node]
-        first = None
-        if j.type == "revolute":
-            axis = np.asarray(j.axis)
-            aligned = []
-            for name in j.members:
-                k = int(np.nonzero(infos[name].nodes == n)[0][0])
-                _, _, v1, v2 = member_geom[name]
-                aligned.append(abs(v1[k] @ axis) > 1.0 - 1e-9 or abs(v2[k] @ axis) > 1.0 - 1e-9)
-            if not all(aligned):
-                # the axis lies in no common section plane: hold the hinge by multipliers
-                for name in j.members[1:]:
-                    hinges.append((j.members[0], name, j.node, tuple(j.axis)))
-                continue
-        for name in j.members:
-            mi = infos[name]
-            k = int(np.nonzero(mi.nodes == n)[0][0])
-            _, _, v1, v2 = member_geom[name]
-            if j.type == "rigid":
-                ids = mi.vdofs[k]
-                frame = np.concatenate((v1[k], v2[k]))
-            else:
-                off = _axis_offset(where, name, j.node, v1[k], v2[k], axis)
-                ids = mi.vdofs[k, off:off + 3]
-                frame = axis
-            if first is None:
-                first = (name, ids, frame)
-                continue
-            if j.type == "rigid" and not np.allclose(frame, first[2], atol=1e-9):
-                corners.append((first[0], name, j.node))       # held by multipliers, not by sharing
-                continue
-            for a, b in zip(first[1], ids):
-                parent[find(int(b))] = find(int(a))
-    return np.array([find(i) for i in range(ndof)], dtype=np.int64)
 
 
 def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map,
