@@ -889,7 +889,6 @@ class _Services:
 
     def __init__(self, twin: TwinNode):
         self.twin = twin
-        node = twin.node
         self.names = {}
         try:
             from std_srvs.srv import Trigger

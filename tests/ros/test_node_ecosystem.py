@@ -188,7 +188,6 @@ def test_joint_state_commands_drive_the_twin_like_float64_commands(tmp_path, dds
 @pytest.mark.timeout(300)
 def test_two_namespaced_twins_run_side_by_side_without_crosstalk(tmp_path, dds_env, stewart):
     model, program = stewart
-    names = list(model.actuators.names)
     bag = tmp_path / "robot1_bag"
     robot1 = NodeProcess([SCENE, "--mode", "lockstep", "--mcap", str(bag), "--ros-args", "-r", "__ns:=/robot1"],
                          dds_env, tmp_path / "robot1.log")
