@@ -16,7 +16,9 @@ from ..scene.schema import Scene, Signal
 from ..servo import ServoParams
 from .frame_geometry import frame_member_geometry, frame_member_mass
 from .model import Actuators, Drives, FrameGroup, Model, MomentLoads, TrussGroup
-from .dof_numbering import _axis_offset, _unit, member_geometry, number_dofs
+from .pattern import Pattern
+from .constraints import build_constraints
+from .dof_numbering import _axis_offset, member_geometry, number_dofs
 from .shell_compile import (build_shell_groups, clamp_node_gdofs, edge_load_patterns, edge_support_dofs,
                             shell_element_pairs, shell_point_node)
 
@@ -38,7 +40,7 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
     ndof, q0, q0_arr, dof_scale = dofs.ndof, dofs.q0, dofs.q0_array, dofs.dof_scale
     node_names, node_x, node_lookup, node_ydofs = dofs.node_names, dofs.node_x, dofs.node_lookup, dofs.node_ydofs
     member_infos, member_geom, member_lookup = dofs.member_infos, dofs.member_geom, dofs.member_lookup
-    shells, corners, hinges = dofs.shells, dofs.corners, dofs.hinges
+    shells = dofs.shells
 
     # -- prescribed DOFs ------------------------------------------------------------------
     fixed = np.zeros(ndof, dtype=bool)
@@ -171,88 +173,20 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
         mass_cols.append(d)
         mass_vals.append(np.full(3, pm.mass))
 
-    # -- rigid corners (multipliers) ---------------------------------------------------------
-    nfree = free.size
-    infos_by_name = {mi.name: mi for mi in member_infos}
-    corner_dofs, corner_alpha, corner_sys = [], [], []
-    for ci, (ma, mb, node) in enumerate(corners):
-        n = node_lookup[node]
-        ka = int(np.nonzero(infos_by_name[ma].nodes == n)[0][0])
-        kb = int(np.nonzero(infos_by_name[mb].nodes == n)[0][0])
-        _, _, v1a, v2a = member_geom[ma]
-        _, _, v1b, v2b = member_geom[mb]
-        w0 = np.array([v1a[ka], v2a[ka], np.cross(v1a[ka], v2a[ka])])
-        corner_alpha.append(np.array([w0 @ v1b[kb], w0 @ v2b[kb]]))
-        ids = np.concatenate((infos_by_name[mb].vdofs[kb], infos_by_name[ma].vdofs[ka]))
-        corner_dofs.append(ids)
-        corner_sys.append(np.concatenate((free_index[ids], nfree + 6 * ci + np.arange(6))))
-    hinge_dofs, hinge_alpha, hinge_beta, hinge_sys = [], [], [], []
-    base = nfree + 6 * len(corners)
-    for hi, (ma, mb, node, axis) in enumerate(hinges):
-        n = node_lookup[node]
-        ka = int(np.nonzero(infos_by_name[ma].nodes == n)[0][0])
-        kb = int(np.nonzero(infos_by_name[mb].nodes == n)[0][0])
-        _, _, v1a, v2a = member_geom[ma]
-        _, _, v1b, v2b = member_geom[mb]
-        axis = _unit(axis)
-        wa = np.array([v1a[ka], v2a[ka], np.cross(v1a[ka], v2a[ka])])
-        wb = np.array([v1b[kb], v2b[kb], np.cross(v1b[kb], v2b[kb])])
-        seed = np.eye(3)[int(np.argmin(np.abs(axis)))]
-        b1 = _unit(seed - (seed @ axis) * axis)
-        b2 = np.cross(axis, b1)
-        hinge_alpha.append(wa @ axis)
-        hinge_beta.append(np.array([wb @ b1, wb @ b2]))
-        ids = np.concatenate((infos_by_name[ma].vdofs[ka], infos_by_name[mb].vdofs[kb]))
-        hinge_dofs.append(ids)
-        hinge_sys.append(np.concatenate((free_index[ids], base + 2 * hi + np.arange(2))))
-    tie_dofs, tie_alpha, tie_sys = _shell_frame_ties(scene, shells, infos_by_name, member_geom, node_lookup,
-                                                     free_index, base + 2 * len(hinges))
-    nsys = base + 2 * len(hinges) + 3 * len(tie_dofs)
-
-    # -- sparse pattern over the system (free DOFs, then multipliers) ----------------------
-    # Keys r·nsys + c of every element block, built block by block (no repeat/tile copies: a
-    # 10⁴-element frame scene has 1.3·10⁷ pairs). The mass adds no pair: every mass entry lies in
-    # the block of an element (frames, bars, shells) or on the diagonal of a node that has one.
-    def block_keys(idx: np.ndarray) -> np.ndarray:
-        """Keys of the (row, col) pairs of system indices ``idx (ne, k)`` where both are ≥ 0."""
-        k = (idx[:, :, None] * nsys + idx[:, None, :]).ravel()
-        both = ((idx[:, :, None] >= 0) & (idx[:, None, :] >= 0)).ravel()
-        return k[both]
-
-    key_parts = [block_keys(free_index[ed]) for b in frame_build.values() for ed in b["edofs"]]
+    # -- multiplier constraints and the sparse pattern over the system (free DOFs, then multipliers)
+    cons = build_constraints(scene, dofs, free_index, free.size)
+    nsys = cons.nsys
+    # The mass adds no pair: every mass entry lies in the block of an element (frames, bars,
+    # shells) or on the diagonal of a node that has one.
+    parts = [free_index[ed] for b in frame_build.values() for ed in b["edofs"]]
     if truss_build:
-        key_parts.append(block_keys(free_index[np.asarray(truss_build["edofs"], dtype=np.int64)]))
-    key_parts += [block_keys(free_index[ed][None, :]) for ed in shell_element_pairs(shells)]
-    key_parts += [block_keys(idx[None, :]) for idx in corner_sys + hinge_sys + tie_sys]
-    keys = _sorted_unique(np.concatenate(key_parts))
-    del key_parts
-    rows = keys // nsys
-    indices = (keys % nsys).astype(np.int64)
-    indptr = np.zeros(nsys + 1, dtype=np.int64)
-    np.add.at(indptr, rows + 1, 1)
-    indptr = np.cumsum(indptr).astype(np.int64)
-
-    def scatter_map_sys(idx: np.ndarray) -> np.ndarray:
-        """CSR position of every (row, col) pair of system indices ``idx`` (−1 outside)."""
-        r = np.repeat(idx, idx.size)
-        c = np.tile(idx, idx.size)
-        out = np.full(r.size, -1, dtype=np.int64)
-        ok_ = (r >= 0) & (c >= 0)
-        out[ok_] = np.searchsorted(keys, r[ok_] * nsys + c[ok_])
-        return out
-
-    def scatter_map(ed: np.ndarray) -> np.ndarray:
-        return scatter_map_sys(free_index[ed])
-
-    def scatter_maps(edofs: np.ndarray) -> np.ndarray:
-        """:func:`scatter_map` of every row of ``edofs (ne, k)`` at once: ``(ne, k²)``."""
-        idx = free_index[edofs]
-        ne, k = idx.shape
-        out = (idx[:, :, None] * nsys + idx[:, None, :]).reshape(ne, k * k)
-        ok_ = ((idx[:, :, None] >= 0) & (idx[:, None, :] >= 0)).reshape(ne, k * k)
-        out[ok_] = np.searchsorted(keys, out[ok_])
-        out[~ok_] = -1
-        return out
+        parts.append(free_index[np.asarray(truss_build["edofs"], dtype=np.int64)])
+    parts += [free_index[ed][None, :] for ed in shell_element_pairs(shells)]
+    parts += [idx[None, :] for idx in cons.system_blocks()]
+    pattern = Pattern.from_blocks(parts, nsys, free_index)
+    del parts
+    keys, indptr, indices = pattern.keys, pattern.indptr, pattern.indices
+    scatter_map = pattern.map
 
     groups = []
     for (order, _, nsec), b in sorted(frame_build.items()):
@@ -261,7 +195,7 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
                        np.ascontiguousarray(np.concatenate(b["dsec"])), np.ascontiguousarray(np.concatenate(b["w"])),
                        np.ascontiguousarray(np.concatenate(b["mat"]), dtype=float),
                        np.ascontiguousarray(np.concatenate(b["act"]), dtype=np.int64),
-                       np.ascontiguousarray(scatter_maps(edofs), dtype=np.int64),
+                       np.ascontiguousarray(pattern.maps(edofs), dtype=np.int64),
                        np.ascontiguousarray(np.concatenate(b["member"]), dtype=np.int64))
         _freeze(g.edofs, g.dax, g.dsec, g.w, g.mat, g.act, g.smap, g.member)
         groups.append(g)
@@ -309,8 +243,8 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
     load_vectors = np.zeros((len(scene.forces) + len(edge_patterns), ndof))
     for i, f in enumerate(scene.forces):
         load_vectors[i, node_ydofs[node_lookup[f.node]]] = f.force
-    for i, pattern in enumerate(edge_patterns):
-        load_vectors[len(scene.forces) + i] = pattern
+    for i, edge_pattern in enumerate(edge_patterns):
+        load_vectors[len(scene.forces) + i] = edge_pattern
     gravity_vector = np.zeros(ndof)
     gravity_signal = Signal()
     if scene.gravity is not None:
@@ -318,17 +252,6 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
         gravity_signal = scene.gravity.signal
     moments = _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, scatter_map, edge_moments)
 
-    corner_arrays = (np.asarray(corner_dofs, dtype=np.int64).reshape(-1, 12),
-                     np.asarray(corner_alpha, dtype=float).reshape(-1, 2, 3),
-                     np.asarray([scatter_map_sys(idx) for idx in corner_sys], dtype=np.int64).reshape(-1, 324))
-    hinge_arrays = (np.asarray(hinge_dofs, dtype=np.int64).reshape(-1, 12),
-                    np.asarray(hinge_alpha, dtype=float).reshape(-1, 3),
-                    np.asarray(hinge_beta, dtype=float).reshape(-1, 2, 3),
-                    np.asarray([scatter_map_sys(idx) for idx in hinge_sys], dtype=np.int64).reshape(-1, 196))
-    tie_arrays = (np.asarray(tie_dofs, dtype=np.int64).reshape(-1, 9),
-                  np.asarray(tie_alpha, dtype=float).reshape(-1, 3),
-                  np.asarray([scatter_map_sys(idx) for idx in tie_sys], dtype=np.int64).reshape(-1, 144))
-    _freeze(*corner_arrays, *hinge_arrays, *tie_arrays)
     drives = None
     if drive_rows:
         drives = Drives(np.array([r[0] for r in drive_rows], dtype=np.int64), np.array([r[1] for r in drive_rows]),
@@ -352,8 +275,8 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
                  tuple(groups), truss, moments, load_vectors,
                  tuple(f.signal for f in scene.forces) + tuple(edge_signals),
                  gravity_vector, gravity_signal, actuators, tuple(member_infos), tuple(node_names), node_ydofs,
-                 scene.mass_damping, total_mass, drives, program, program_index, nsys, *corner_arrays,
-                 *hinge_arrays, node_lookup, member_lookup, shell_groups, shells, *tie_arrays)
+                 scene.mass_damping, total_mass, drives, program, program_index, nsys, **cons.arrays(pattern),
+                 node_lookup=node_lookup, member_lookup=member_lookup, shell_groups=shell_groups, shells=shells)
 
 
 def _sections(scene: Scene) -> dict[str, secmod.SectionProperties]:
@@ -386,16 +309,6 @@ def _servo_params(scene: Scene, act_names: list[str], act_stroke: np.ndarray) ->
                     col(lambda s: s.max_rate), col(lambda s: s.max_accel), np.ascontiguousarray(act_stroke[idx]))
     _freeze(p.index, p.wn, p.zeta, p.max_rate, p.max_accel, p.stroke)
     return p
-
-
-def _sorted_unique(a: np.ndarray) -> np.ndarray:
-    """``np.unique`` of an int64 array by sort and compare (numpy's hash-based default is several
-    times slower on the 10⁷ CSR keys of a 10⁴-element frame scene); the same values."""
-    a = np.sort(a, kind="stable")
-    keep = np.empty(a.size, dtype=bool)
-    keep[:1] = True
-    np.not_equal(a[1:], a[:-1], out=keep[1:])
-    return a[keep]
 
 
 def _member_geometry(where: str, *args, **kw):
@@ -451,28 +364,3 @@ def _moment_loads(scene, member_infos, member_lookup, member_geom, node_lookup, 
     _freeze(out.follower_vdofs, out.follower_mbody, out.follower_smap, out.cons_vdofs, out.cons_axes,
             out.cons_magnitude, out.cons_smap)
     return out
-
-
-def _shell_frame_ties(scene: Scene, shells, infos_by_name, member_geom, node_lookup, free_index: np.ndarray,
-                      first_multiplier: int) -> tuple[list, list, list]:
-    """``shell_rigid`` joints: the shell director G at a corner node tied to the frame member's
-    section vectors, G = α1 V1 + α2 V2 + α3 V1 × V2 with α from the reference geometry (3
-    multipliers each, numbered from ``first_multiplier``). Returns (dofs [G, V1, V2] (9,), α (3,),
-    system ids (12,)) per tie."""
-    dofs, alpha, sys_ids = [], [], []
-    by_shell = {i.name: i for i in shells}
-    for j in scene.shell_joints:
-        if j.type != "shell_rigid":
-            continue
-        n = node_lookup[j.node]
-        info = by_shell[j.shell]
-        ks = int(np.nonzero(info.nodes == n)[0][0])
-        mi = infos_by_name[j.member]
-        km = int(np.nonzero(mi.nodes == n)[0][0])
-        _, _, v1, v2 = member_geom[j.member]
-        frame = np.array([v1[km], v2[km], np.cross(v1[km], v2[km])])
-        alpha.append(frame @ info.normal0[ks])
-        ids = np.concatenate((info.gdofs[ks], mi.vdofs[km]))
-        dofs.append(ids)
-        sys_ids.append(np.concatenate((free_index[ids], first_multiplier + 3 * len(sys_ids) + np.arange(3))))
-    return dofs, alpha, sys_ids
