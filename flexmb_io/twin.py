@@ -150,6 +150,8 @@ class TwinRunner:
             self.sim.set_commands(rest)
         if warmup and self.schedule is not None:
             self.schedule.warmup()
+        if warmup and self.faults.active:
+            self.faults.check(self.sim.state.q, np.zeros(0))      # compile the limits' kernels now
         self.sim.initialize()
         self._backup = self.sim.state.copy()
         return self.sample()
