@@ -1,11 +1,12 @@
 """Fuzz (issue 15): 10⁴ mixed command messages — valid, malformed and hostile, seeded — on all four
-command topics of a real-time twin node over DDS, as fast as the client can publish. The node
+command topics of a real-time twin node over DDS. The node
 survives, answers SIGINT with 130 and its summary, counts the rejections by kind, logs no traceback
 and never publishes a non-finite number.
 
-Measured: about a third of the burst reaches the node (the command subscriptions are best effort,
-so that best-effort publishers match; the rest is dropped by the transport, and rmw_fastrtps reports
-no message-lost status for it, so the node cannot count it)."""
+The client paces itself (a short spin every 20 messages): unpaced, about a third of the burst
+reaches the node on an idle machine and less under load (the command subscriptions are best effort,
+so that best-effort publishers match; the rest is dropped by DDS, and rmw_fastrtps reports no
+message-lost status for it, so the node cannot count it — README "Lost commands")."""
 
 from __future__ import annotations
 
@@ -108,8 +109,10 @@ def test_ten_thousand_mixed_messages_are_answered_and_nothing_breaks(tmp_path, d
             st = client.statuses()
             topic, msg = _message(rng, st[-1].header.stamp.sec + 1e-9 * st[-1].header.stamp.nanosec if st else 0.0)
             client.publish(topic, msg)
-            if k % 50 == 0:
-                client.executor.spin_once(timeout_sec=0.0)
+            if k % 20 == 0:
+                # paced at a few kHz: what is measured is the node's handling, not how much of an
+                # unpaced burst DDS delivers (that depends on the machine's load)
+                client.executor.spin_once(timeout_sec=0.002)
                 assert node.alive(), node.log()[-3000:]
         steps_then = client.statuses()[-1].steps
         client.spin_until(lambda: client.statuses()[-1].steps > steps_then + 100, 30, "the twin to step on", node)
