@@ -71,9 +71,8 @@ class Measurements:
     last_ns: int
 
 
-def _pose_topics(setup: TwinSetup, overrides) -> dict[str, str]:
+def _pose_topics(twin, setup: TwinSetup) -> dict[str, str]:
     """Resolved pose topic → platform_pose output name."""
-    twin = build_twin(setup, list(overrides))
     poses = [o for o in twin.scene.outputs if o.kind == "platform_pose"]
     return {T.pose_topic(o.name, i).resolved(setup.node_name, setup.namespace): o.name for i, o in enumerate(poses)}
 
@@ -96,7 +95,9 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
     overrides = tuple(overrides or ())
     kinds = input_kinds(setup.node_name, setup.namespace)
     act_topic = T.ACTUATOR_STATES.resolved(setup.node_name, setup.namespace)
-    poses = _pose_topics(setup, overrides)
+    twin = build_twin(setup, list(overrides))        # compiled once: pose topics, actuator names
+    poses = _pose_topics(twin, setup)
+    acts = set(twin.model.actuators.names)
     stop = None if until is None else int(round(until * 1e9))
     commands, rows = [], {}                       # rows: channel → (times, values, columns)
 
@@ -117,7 +118,7 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
             add("actuators.force", m.log_time_ns, r.axial_forces, r.names)
             add("actuators.velocity", m.log_time_ns, r.velocities, r.names)
         elif m.type == "sensor_msgs/msg/JointState" and not have_act:
-            _joint_state_rows(add, m.log_time_ns, m.decode(), setup, overrides)
+            _joint_state_rows(add, m.log_time_ns, m.decode(), acts)
         elif m.topic in poses:
             p = m.decode().pose
             add(f"{poses[m.topic]}.position", m.log_time_ns, (p.position.x, p.position.y, p.position.z), "xyz")
@@ -133,10 +134,9 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
     return Measurements(setup, overrides, tuple(fit_keys), commands, tuple(chosen), last)
 
 
-def _joint_state_rows(add, t: int, r, setup: TwinSetup, overrides) -> None:
+def _joint_state_rows(add, t: int, r, acts: set[str]) -> None:
     """``/joint_states`` as channels when the bag has no ``~/actuator_states``."""
     names = list(r.name)
-    acts = set(_actuator_names(setup, overrides))
     a = [i for i, n in enumerate(names) if n in acts]
     j = [i for i, n in enumerate(names) if n not in acts]
     pos, vel, eff = (np.asarray(x, dtype=float) for x in (r.position, r.velocity, r.effort))
@@ -149,16 +149,6 @@ def _joint_state_rows(add, t: int, r, setup: TwinSetup, overrides) -> None:
             add("actuators.velocity", t, vel[a], cols)
     if j:
         add("joints.angle", t, pos[j], [names[i] for i in j])
-
-
-_ACTUATOR_NAMES: dict = {}
-
-
-def _actuator_names(setup: TwinSetup, overrides) -> tuple[str, ...]:
-    key = (setup.scene_text, tuple(overrides))
-    if key not in _ACTUATOR_NAMES:
-        _ACTUATOR_NAMES[key] = tuple(build_twin(setup, list(overrides)).model.actuators.names)
-    return _ACTUATOR_NAMES[key]
 
 
 def _select(channels: list[Channel], outputs: list[str] | None, bag) -> list[Channel]:
