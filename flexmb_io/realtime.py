@@ -152,10 +152,21 @@ class StepperStats:
 
 class Samples:
     """The newest ``capacity`` values of a per-step quantity, in a buffer allocated once (a node
-    runs for hours: a growing list would allocate at every step), and the count and sum of all."""
+    runs for hours: a growing list would allocate at every step), and the count and sum of all.
+
+    :meth:`percentiles` allocates nothing either: it works in a scratch buffer allocated once.
+    Measured (issue 15, ``docs/benchmarks/node_rss_soak.md``): ``np.percentile`` of ``sign *
+    buffer`` made two temporaries as large as the filled part of the buffer, once a second for
+    ``/diagnostics``; as the buffer filled, glibc served the ever larger temporaries from the
+    publisher thread's malloc arena, which grew by ≈ 1 MB a minute and never gave the memory back
+    (``malloc_trim`` freed none of it), and each call held the GIL for milliseconds over 4 MB.
+    Periodic reports therefore ask for the ``last`` values only (``/diagnostics``: the last
+    second's window); the whole buffer is read for the run's summary."""
 
     def __init__(self, capacity: int = 1 << 19):
         self._buf = np.empty(capacity)
+        self._scratch = np.empty(capacity)
+        self._scratch_lock = threading.Lock()    # two reporting threads may ask at once
         self.count = 0
         self.total = 0.0
 
@@ -164,12 +175,48 @@ class Samples:
         self.count += 1
         self.total += x
 
-    def percentiles(self, qs=(50, 99), sign: float = 1.0) -> dict:
-        """Percentiles of ``sign`` × the values in the window, its max, and how many it holds."""
-        a = sign * self._buf[:min(self.count, self._buf.size)]
-        if not a.size:
+    def percentiles(self, qs=(50, 99), sign: float = 1.0, last: int | None = None) -> dict:
+        """Percentiles of ``sign`` × the newest ``last`` values (default: all the buffer holds), their
+        max, and how many they are."""
+        size = self._buf.size
+        n = min(self.count, size) if last is None else min(self.count, size, max(0, int(last)))
+        if not n:
             return {f"p{q}": 0.0 for q in qs} | {"max": 0.0, "count": 0}
-        return {f"p{q}": float(np.percentile(a, q)) for q in qs} | {"max": float(a.max()), "count": int(a.size)}
+        with self._scratch_lock:
+            a = self._scratch[:n]
+            end = self.count % size             # one past the newest value
+            head = min(n, end)                  # the newest values before the wrap-around
+            np.multiply(self._buf[end - head:end], sign, out=a[n - head:])
+            if n > head:                        # the older ones, at the end of the ring
+                np.multiply(self._buf[size - (n - head):], sign, out=a[:n - head])
+            top = float(a.max())
+            # in place: np.percentile would otherwise copy the n values (overwrite_input)
+            values = np.percentile(a, qs, overwrite_input=True)
+        return {f"p{q}": float(v) for q, v in zip(qs, values)} | {"max": top, "count": int(n)}
+
+
+class Series:
+    """Every value of a per-step quantity, appended in amortized O(1) to a float64 buffer that
+    doubles when full: 8 bytes per value for as long as the run lasts (a Python list of floats
+    takes 32, and a 1 kHz client keeps three of them)."""
+
+    def __init__(self, capacity: int = 1 << 12):
+        self._buf = np.empty(capacity)
+        self.count = 0
+
+    def add(self, x: float) -> None:
+        if self.count == self._buf.size:
+            self._buf = np.concatenate([self._buf, np.empty(self._buf.size)])
+        self._buf[self.count] = x
+        self.count += 1
+
+    def __len__(self) -> int:
+        return self.count
+
+    @property
+    def values(self) -> np.ndarray:
+        """The values so far, shape (count,) (a view: copy it to keep it past the next add)."""
+        return self._buf[:self.count]
 
 
 class Stepper:

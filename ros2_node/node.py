@@ -572,7 +572,8 @@ class TwinNode:
             window = min(self.stepper.cfg.window, self.runner.counters.steps)
             msg = (f"behind real time: {st.recent_misses} of the last {window} steps missed their "
                    f"deadline ({st.deadline_misses} in total, {st.overruns} re-anchored); step wall time p99 "
-                   f"{1e3 * self.stepper.step_walls.percentiles((99,))['p99']:.3f} ms for Δt = {1e3 * self.dt:g} ms")
+                   f"{1e3 * self.stepper.step_walls.percentiles((99,), last=window)['p99']:.3f} ms for Δt = "
+                   f"{1e3 * self.dt:g} ms")
         if st.dropped_snapshots:
             msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_snapshots} publications "
                                                  "dropped")
@@ -770,7 +771,7 @@ class Diagnostics:
         snap = twin._last_sample
         st = twin.stepper.stats
         c = twin.runner.counters
-        walls = twin.stepper.step_walls.percentiles((50, 99))
+        walls = twin.stepper.step_walls.percentiles((50, 99), last=twin.stepper.cfg.window)
         ok, warn, error = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
         def entry(what, level, message, values):

@@ -27,9 +27,12 @@ import numpy as np
 from flexmb_core.errors import FlexmbError
 from flexmb_io import messages as M
 from flexmb_io import topics as T
+from flexmb_io.realtime import Series
 from flexmb_io.wire import serialize
 
 from .convert import message_class
+
+UNANSWERED_AFTER = 10.0     # s after which a command without an answer is counted unanswered and forgotten
 
 
 # steps of wall time the realtime player extrapolates the twin's time beyond its last report
@@ -171,11 +174,13 @@ class Player:
         self.sim_time = None                  # twin's newest reported time (s)
         self.t0 = 0.0                         # twin's time when playback began: the law's t = 0
         self.wall_at_sim_time = 0.0
-        self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent
-        self.latencies: list[float] = []
+        self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent, until answered or expired
+        self.expired = 0                      # commands unanswered for UNANSWERED_AFTER s (dropped from sent)
+        self._next_expiry = 0.0               # perf_counter of the next sweep of sent (once a second)
+        self.latencies = Series()             # s, command sent → status echoing its stamp
         self.answered_ns = -1
-        self.pose_errors: list[float] = []
-        self.angle_errors: list[float] = []
+        self.pose_errors = Series()           # m
+        self.angle_errors = Series()          # rad
         self.statuses = 0
         self.unconverged = 0
         self.last_status = None
@@ -190,7 +195,7 @@ class Player:
         ns = msg.command_stamp.sec * 1_000_000_000 + msg.command_stamp.nanosec
         sent = self.sent.pop(ns, None)
         if sent is not None:
-            self.latencies.append(now - sent)
+            self.latencies.add(now - sent)
         self.answered_ns = max(self.answered_ns, ns)
         self._note_time(msg.sim_time, now)
 
@@ -212,9 +217,9 @@ class Player:
         p_ref, q_ref = ref(t)
         p = msg.pose.position
         o = msg.pose.orientation
-        self.pose_errors.append(float(np.linalg.norm(np.array([p.x, p.y, p.z]) - p_ref)))
+        self.pose_errors.add(float(np.linalg.norm(np.array([p.x, p.y, p.z]) - p_ref)))
         dot = abs(float(np.dot([o.w, o.x, o.y, o.z], q_ref)))
-        self.angle_errors.append(2.0 * math.acos(min(1.0, dot)))
+        self.angle_errors.add(2.0 * math.acos(min(1.0, dot)))
 
     # -- sending ---------------------------------------------------------------------------------
     def _send(self, t_target: float) -> None:
@@ -225,8 +230,20 @@ class Player:
             d = M.float64_array(lengths)
         else:
             d = M.actuator_command(t_target, self.source.names, lengths, rates)
-            self.sent[ns] = time.perf_counter()
+            now = time.perf_counter()
+            self.sent[ns] = now
+            if now >= self._next_expiry:
+                self._next_expiry = now + 1.0
+                self._expire(now)
         self.pub.publish(serialize(self.topic.type, d))
+
+    def _expire(self, now: float) -> None:
+        """Forget commands unanswered for :data:`UNANSWERED_AFTER` s (counted as unanswered): a twin
+        that drops commands must not grow the client's memory for as long as it runs."""
+        old = [ns for ns, sent in self.sent.items() if now - sent > UNANSWERED_AFTER]
+        for ns in old:
+            del self.sent[ns]
+        self.expired += len(old)
 
     def _wait_for_twin(self) -> None:
         t_end = time.monotonic() + self.timeout
@@ -302,16 +319,17 @@ class Player:
                 self.executor.spin_once(timeout_sec=rem)
 
     def summary(self, wall: float) -> dict:
-        lat = np.array(self.latencies) if self.latencies else np.zeros(0)
+        lat = self.latencies.values
         out = {"mode": self.mode, "topic": self.topic.name, "wall_time_s": wall, "t0_s": self.t0, "statuses": self.statuses,
-               "unconverged_reported": self.unconverged, "commands_unanswered": len(self.sent),
+               "unconverged_reported": self.unconverged, "commands_unanswered": len(self.sent) + self.expired,
                "latency_s": {"p50": float(np.percentile(lat, 50)) if lat.size else None,
                              "p99": float(np.percentile(lat, 99)) if lat.size else None,
                              "max": float(lat.max()) if lat.size else None, "count": int(lat.size)}}
-        if self.pose_errors:
-            out["tracking"] = {"max_position_error_m": max(self.pose_errors),
-                               "rms_position_error_m": float(np.sqrt(np.mean(np.square(self.pose_errors)))),
-                               "max_orientation_error_rad": max(self.angle_errors), "samples": len(self.pose_errors)}
+        if len(self.pose_errors):
+            pos, ang = self.pose_errors.values, self.angle_errors.values
+            out["tracking"] = {"max_position_error_m": float(pos.max()),
+                               "rms_position_error_m": float(np.sqrt(np.mean(np.square(pos)))),
+                               "max_orientation_error_rad": float(ang.max()), "samples": int(pos.size)}
         s = self.last_status
         if s is not None:
             out["twin"] = {"sim_time_s": s.sim_time, "steps": int(s.steps), "deadline_misses": int(s.deadline_misses),
