@@ -114,7 +114,7 @@ class TwinNode:
             value = values.get(spec.name, spec.default)
             if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
                 value = float(value)
-            effective[spec.name] = self.node.declare_parameter(spec.name, value, desc).value
+            effective[spec.name] = _declare(self.node, spec, value, desc)
         self.p = NodeParams.from_values(effective)
         if self.p.mode == "lockstep" and self.p.command_source == "scene":
             raise FlexmbError("parameter 'mode': lockstep steps once per received command, so it needs "
@@ -805,6 +805,24 @@ class Diagnostics:
         now = twin.node.get_clock().now().to_msg()
         msg.header.stamp = now
         self._pub.publish(msg)
+
+
+def _declare(node, spec, value, descriptor):
+    """Declare one parameter; a value out of its range or of the wrong type (a flag or ``-p``) is a
+    :class:`FlexmbError` naming the parameter, the value and what was expected, not rclpy's traceback."""
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+
+    try:
+        return node.declare_parameter(spec.name, value, descriptor).value
+    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+        if isinstance(exc, InvalidParameterTypeException):
+            expected = f"a {type(spec.default).__name__}"
+        elif spec.low is not None:
+            expected = f"a value in [{spec.low:g}, {spec.high:g}]"
+        else:
+            expected = f"one of {list(spec.choices)}" if spec.choices else "a valid value"
+        raise FlexmbError(f"parameter '{spec.name}' (flag --{spec.name.replace('_', '-')} or -p "
+                          f"{spec.name}:=...): expected {expected}; rclpy: {str(exc)[:160]}") from None
 
 
 def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: list[str] | None = None) -> dict:

@@ -218,8 +218,15 @@ def test_realtime_node_owns_the_clock(tmp_path, dds_env):
     assert st.real_time_factor > 0 and st.converged
 
 
-def test_bad_parameter_fails_with_a_clear_message(dds_env):
-    p = subprocess.run([sys.executable, "-m", "flexmb.cli", "node", SCENE, "--ros-args", "-p", "publish_rate:=-5.0"],
+@pytest.mark.parametrize("args, expected", [
+    (["--ros-args", "-p", "publish_rate:=-5.0"], "parameter 'publish_rate' (flag --publish-rate or -p publish_rate:=...): "
+                                                 "expected a value in [1, 10000]"),
+    (["--clock-rate", "0"], "parameter 'clock_rate' (flag --clock-rate or -p clock_rate:=...): expected a value in [1, "),
+    (["--ros-args", "-p", "dt:=abc"], "parameter 'dt' (flag --dt or -p dt:=...): expected a float; rclpy: "),
+])
+def test_bad_parameter_fails_with_a_clear_message(dds_env, args, expected):
+    p = subprocess.run([sys.executable, "-m", "flexmb.cli", "node", SCENE] + args,
                        env=dds_env, cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert p.returncode != 0
-    assert "publish_rate" in p.stderr + p.stdout
+    assert p.returncode == 1
+    assert expected in p.stderr
+    assert "Traceback" not in p.stderr + p.stdout
