@@ -14,6 +14,7 @@ rclpy.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -22,6 +23,7 @@ import time
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=30.0, help="wall seconds to run")
+    ap.add_argument("--json", help="write the echo's CPU time and the commands it answered here on exit")
     args = ap.parse_args()
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
@@ -40,6 +42,8 @@ def main() -> int:
     clock_pub = node.create_publisher(Clock, "/clock", qos)
     status, clock = TwinStatus(), Clock()
     t0 = time.perf_counter()
+    cpu0 = time.process_time()
+    answered = [0]
 
     def sim_time() -> float:
         return time.perf_counter() - t0
@@ -55,6 +59,7 @@ def main() -> int:
         stamp(status.header.stamp, t)
         status.converged = True
         status_pub.publish(status)
+        answered[0] += 1
 
     def on_timer() -> None:
         stamp(clock.clock, sim_time())
@@ -71,6 +76,11 @@ def main() -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        if args.json:
+            wall = time.perf_counter() - t0
+            cpu = time.process_time() - cpu0
+            with open(args.json, "w") as f:
+                json.dump({"cpu_s": cpu, "wall_s": wall, "core_fraction": cpu / wall, "answered": answered[0]}, f)
         node.destroy_node()
         if ctx.ok():
             rclpy.shutdown(context=ctx)

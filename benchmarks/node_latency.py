@@ -24,11 +24,14 @@ import json
 import os
 import platform
 import random
+import signal
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+import host_jitter
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "benchmarks"
@@ -54,24 +57,31 @@ def run_pingpong(seconds: float, rate: float) -> dict:
     env = _env()
     out = ROOT / "build" / "bench_node" / "pingpong.json"
     out.unlink(missing_ok=True)
+    echo_json = ROOT / "build" / "bench_node" / "echo.json"
+    echo_json.unlink(missing_ok=True)
     echo = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "dds_echo.py"), "--seconds",
-                             str(seconds + 60)], env=env, cwd=ROOT)
+                             str(seconds + 60), "--json", str(echo_json)], env=env, cwd=ROOT)
     try:
         p = subprocess.run([sys.executable, "-m", "flexmb.cli", "play", CASES["bars"][0], "--mode", "realtime",
                             "--until", str(seconds), "--json", str(out), "--quiet", "--timeout", "60", "--rate",
                             str(rate)],
                            env=env, cwd=ROOT, capture_output=True, text=True)
     finally:
-        echo.terminate()
+        echo.send_signal(signal.SIGINT)        # it writes its CPU time on the way out
         echo.wait(timeout=30)
     if p.returncode != 0:
         raise RuntimeError(f"ping-pong player failed ({p.returncode}):\n{p.stdout[-2000:]}\n{p.stderr[-2000:]}")
     lat = json.loads(out.read_text())["latency_s"]
-    return {"kind": "pingpong", "seconds": seconds, "latency_p50_ms": 1e3 * lat["p50"],
+    cpu = json.loads(echo_json.read_text()) if echo_json.exists() else {}
+    # the bare echo's CPU per answered command, at the command rate: the floor of what answering
+    # every command costs in rclpy (the node's "CPU beyond the solver" compares with it)
+    echo_core = cpu["cpu_s"] / cpu["answered"] * rate if cpu.get("answered") else None
+    return {"kind": "pingpong", "seconds": seconds, "echo_cpu_core": echo_core, "latency_p50_ms": 1e3 * lat["p50"],
             "latency_p99_ms": 1e3 * lat["p99"], "latency_max_ms": 1e3 * lat["max"], "latency_count": lat["count"]}
 
 
-def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float) -> dict:
+def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float,
+             step_margin: float | None = None) -> dict:
     """``flexmb demo`` of one case: the node's and the player's summaries, flattened."""
     scene, what = CASES[name]
     out = ROOT / "build" / "bench_node" / name
@@ -79,6 +89,8 @@ def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float) ->
            "--out", str(out), "--rate", str(rate)]
     if rt_priority is not None:
         cmd += ["--rt-priority", str(rt_priority)]
+    if step_margin is not None:
+        cmd += ["--step-margin", str(step_margin)]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=_env(), cwd=ROOT, capture_output=True, text=True)
     if p.returncode != 0:
@@ -108,11 +120,11 @@ def _median(rows: list[dict], key: str) -> float:
     return statistics.median(r[key] for r in rows)
 
 
-def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> None:
+def write(rounds: list[dict], soak: dict | None, extra: list[dict], jitter: dict | None, args) -> None:
     DOCS.mkdir(parents=True, exist_ok=True)
     meta = {"python": sys.version.split()[0], "machine": platform.machine(), "cpus": os.cpu_count(),
             "date": time.strftime("%Y-%m-%d"), "seconds": args.seconds, "rounds": args.rounds, "soak_s": args.soak,
-            "rt_priority": args.rt_priority, "command_rate_hz": args.rate, "load_avg_start": args.load_start, "load_avg_end": os.getloadavg()}
+            "rt_priority": args.rt_priority, "step_margin_s": args.step_margin, "command_rate_hz": args.rate, "load_avg_start": args.load_start, "load_avg_end": os.getloadavg()}
     pp = [r for r in rounds if r["kind"] == "pingpong"]
     tw = [r for r in rounds if r["kind"] == "twin"]
     verdict = {}
@@ -121,6 +133,8 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
         verdict = {"pingpong_p50_ms": _median(pp, "latency_p50_ms"), "pingpong_p99_ms": base99,
                    "twin_p50_ms": _median(tw, "latency_p50_ms"), "twin_p99_ms": twin99,
                    "twin_p99_over_pingpong_ms": twin99 - base99,
+                   "echo_cpu_core": (statistics.median(r["echo_cpu_core"] for r in pp)
+                                     if all(r.get("echo_cpu_core") is not None for r in pp) else None),
                    "p99_target_met": twin99 <= 1e3 * P99_MAX_S and twin99 - base99 <= 1e3 * P99_OVER_BASELINE_S}
     if soak is not None:
         verdict |= {"soak_deadline_misses": soak["deadline_misses"], "soak_steps": soak["steps"],
@@ -128,7 +142,7 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
                     "cpu_target_met": soak["cpu_beyond_solver_core"] <= CPU_BEYOND_SOLVER_MAX,
                     "deadline_target_met": soak["deadline_misses"] == 0}
     (DOCS / f"{args.name}.json").write_text(json.dumps({"meta": meta, "verdict": verdict, "rounds": rounds, "soak": soak,
-                                                "other_cases": extra}, indent=2) + "\n")
+                                                "other_cases": extra, "host_jitter": jitter}, indent=2) + "\n")
     lines = [
         f"# The twin node at 1 kHz on DDS, commands at {args.rate:g} Hz (`benchmarks/node_latency.py`)",
         "",
@@ -148,7 +162,9 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
     for i, r in enumerate(rounds):
         lat = f"{r['latency_p50_ms']:.3f} / {r['latency_p99_ms']:.3f} / {r['latency_max_ms']:.2f}"
         if r["kind"] == "pingpong":
-            lines.append(f"| {i // 2 + 1} | DDS ping-pong | {lat} | — | — | — |")
+            core = r.get("echo_cpu_core")
+            lines.append(f"| {i // 2 + 1} | DDS ping-pong | {lat} | — | — | "
+                         f"{'—' if core is None else f'echo: {100 * core:.1f} %'} |")
         else:
             lines.append(f"| {i // 2 + 1} | twin ({r['case']}) | {lat} | {r['deadline_misses']} / {r['steps']} | "
                          f"{r['step_wall_p50_ms']:.3f} / {r['step_wall_p99_ms']:.3f} | "
@@ -166,9 +182,20 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], args) -> Non
                   f"- latency p50 / p99 / max: {soak['latency_p50_ms']:.3f} / {soak['latency_p99_ms']:.3f} / "
                   f"{soak['latency_max_ms']:.2f} ms ({soak['latency_count']} commands)",
                   f"- node CPU: {soak['cpu_process_s']:.1f} s, of which solver steps {soak['cpu_solver_steps_s']:.1f} s: "
-                  f"**{100 * soak['cpu_beyond_solver_core']:.1f} % of a core beyond the solver** (target ≤ 15 %)",
+                  f"**{100 * soak['cpu_beyond_solver_core']:.1f} % of a core beyond the solver** (target ≤ 15 %"
+                  + (f"; the bare rclpy echo alone, answering each command with one status: "
+                     f"{100 * verdict['echo_cpu_core']:.1f} % of a core" if verdict.get("echo_cpu_core") else "") + ")",
                   f"- dropped publications {soak['dropped_publications']}, failed steps {soak['failed_steps']}, "
                   f"rejected commands {soak['rejected']}"]
+    if jitter is not None:
+        over = ", ".join(f"> {k}: {v}" for k, v in jitter["late_over"].items())
+        lines += ["", f"## The host's own timer ({jitter['seconds']:g} s, `benchmarks/host_jitter.py`)", "",
+                  f"A thread ({jitter['scheduling']}) woken every {1e3 * jitter['period_s']:g} ms the way the "
+                  f"stepping thread waits, nothing else of flexmb running: wake-up lateness p50 / p99 / p99.9 / max "
+                  f"{1e3 * jitter['late_p50_s']:.3f} / {1e3 * jitter['late_p99_s']:.3f} / "
+                  f"{1e3 * jitter['late_p999_s']:.3f} / {1e3 * jitter['late_max_s']:.2f} ms; wake-ups late {over} "
+                  f"(of {jitter['wakes']}). A wake-up later than `step_margin` minus the step's own time is a "
+                  "deadline miss whatever the twin does."]
     if extra:
         lines += ["", "## Other fidelities (one run each)", "",
                   "| case | model | RTF | solver alone RTF | missed deadlines | step p50 / p99 (ms) | latency p50 / p99 (ms) |",
@@ -189,6 +216,10 @@ def main() -> int:
     ap.add_argument("--name", default="node", help="report name: docs/benchmarks/NAME.{md,json}")
     ap.add_argument("--soak", type=float, default=600.0, help="s of the long bar-twin run (0: none)")
     ap.add_argument("--cases", default="frame1", help="further cases, one run each (comma-separated; '' none)")
+    ap.add_argument("--step-margin", type=float, default=None,
+                    help="the node's step_margin (s; default the node's, 0.0004)")
+    ap.add_argument("--jitter", type=float, default=60.0,
+                    help="s of the host's own wake-up lateness (benchmarks/host_jitter.py; 0: none)")
     ap.add_argument("--rt-priority", type=int, default=None,
                     help="SCHED_FIFO priority of the node's stepping thread (default: the node's, -1 = 20 where allowed)")
     args = ap.parse_args()
@@ -196,19 +227,22 @@ def main() -> int:
     rounds = []
     for _ in range(args.rounds):
         for run in (lambda: run_pingpong(args.seconds, args.rate),
-                    lambda: run_twin("bars", args.seconds, args.rt_priority, args.rate)):
+                    lambda: run_twin("bars", args.seconds, args.rt_priority, args.rate, args.step_margin)):
             r = run()
             print(json.dumps(r), flush=True)
             rounds.append(r)
     extra = []
     for name in filter(None, args.cases.split(",")):
-        r = run_twin(name, args.seconds, args.rt_priority, args.rate)
+        r = run_twin(name, args.seconds, args.rt_priority, args.rate, args.step_margin)
         print(json.dumps(r), flush=True)
         extra.append(r)
-    soak = run_twin("bars", args.soak, args.rt_priority, args.rate) if args.soak > 0 else None
+    soak = run_twin("bars", args.soak, args.rt_priority, args.rate, args.step_margin) if args.soak > 0 else None
+    jitter = host_jitter.measure(args.jitter) if args.jitter > 0 else None
+    if jitter is not None:
+        print(json.dumps(jitter), flush=True)
     if soak is not None:
         print(json.dumps(soak), flush=True)
-    write(rounds, soak, extra, args)
+    write(rounds, soak, extra, jitter, args)
     print(f"wrote {DOCS / (args.name + '.md')}")
     return 0
 

@@ -56,7 +56,8 @@ def _rss_mb(pid: int) -> float | None:
     return None
 
 
-def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tuple[float, float]], dict]:
+def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tuple], dict]:
+    """The demo run; returns [(s since start, node RSS MB, player RSS MB or None)] and its summary."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 200)))
     env.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".cache" / "numba"))
     demo = subprocess.Popen([sys.executable, "-m", "flexmb.cli", "demo", scene, "--mode", "realtime", "--until",
@@ -70,11 +71,12 @@ def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tupl
     if node is None:
         demo.kill()
         raise RuntimeError(f"the node process of the demo was not found: {demo.stderr.read()[-2000:]}")
-    series = []
+    series, player = [], None
     while demo.poll() is None:
+        player = player or next((p for p in _children(demo.pid) if " play " in _cmdline(p)), None)
         rss = _rss_mb(node)
         if rss is not None:
-            series.append((time.monotonic() - t0, rss))
+            series.append((time.monotonic() - t0, rss, _rss_mb(player) if player else None))
         time.sleep(every)
     _, err = demo.communicate()
     if demo.returncode != 0:
@@ -93,21 +95,23 @@ def main() -> int:
     a = ap.parse_args()
     load0 = os.getloadavg()[0]
     series, summary = soak(a.scene, a.seconds, a.every, ROOT / "build" / "bench_rss")
-    after = [r for t, r in series if t >= a.warmup]
+    after = [r for t, r, _ in series if t >= a.warmup]
+    player_after = [p for t, _, p in series if t >= a.warmup and p is not None]
+    player_growth = (player_after[-1] - player_after[0]) if len(player_after) >= 2 else None
     growth = (after[-1] - after[0]) if len(after) >= 2 else float("nan")
     node = summary["node"]
     result = {"scene": a.scene, "seconds": a.seconds, "every_s": a.every, "warmup_s": a.warmup,
               "python": sys.version.split()[0], "date": time.strftime("%Y-%m-%d"), "load_before": load0,
               "rss_start_mb": series[0][1], "rss_at_warmup_mb": after[0] if after else None,
-              "rss_end_mb": series[-1][1], "rss_max_mb": max(r for _, r in series),
-              "growth_after_warmup_mb": growth, "target_met": growth < GROWTH_MAX_MB,
+              "rss_end_mb": series[-1][1], "rss_max_mb": max(r for _, r, _ in series),
+              "growth_after_warmup_mb": growth, "player_growth_after_warmup_mb": player_growth, "target_met": growth < GROWTH_MAX_MB,
               "steps": node["steps"], "deadline_misses": node["deadline_misses"], "series": series}
     DOCS.mkdir(parents=True, exist_ok=True)
     (DOCS / f"{a.name}.json").write_text(json.dumps(result, indent=1) + "\n")
     marks, next_mark = [], 0.0                       # one row per 5 minutes, and the last sample
-    for t, r in series:
+    for t, r, pr in series:
         if t >= next_mark:
-            marks.append((t, r))
+            marks.append((t, r, pr))
             next_mark += 300.0
     if marks[-1] != series[-1]:
         marks.append(series[-1])
@@ -119,9 +123,11 @@ def main() -> int:
              f"{a.warmup / 60:g} min, {result['rss_end_mb']:.1f} MB at the end (max {result['rss_max_mb']:.1f} MB)",
              f"- growth after warm-up: **{growth:+.2f} MB** over {(a.seconds - a.warmup) / 60:g} min "
              f"(target < {GROWTH_MAX_MB:g} MB: {'met' if result['target_met'] else 'NOT met'})",
+             f"- the player's (the 1 kHz client's) growth after warm-up: "
+             + (f"{player_growth:+.2f} MB" if player_growth is not None else "not sampled"),
              f"- steps {node['steps']}, missed deadlines {node['deadline_misses']}", "",
-             "| t (min) | RSS (MB) |", "|---|---|"]
-    lines += [f"| {t / 60:.1f} | {r:.1f} |" for t, r in marks]
+             "| t (min) | node RSS (MB) | player RSS (MB) |", "|---|---|---|"]
+    lines += [f"| {t / 60:.1f} | {r:.1f} | {'' if pr is None else f'{pr:.1f}'} |" for t, r, pr in marks]
     (DOCS / f"{a.name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines[:8]))
     return 0

@@ -46,9 +46,11 @@ from flexmb_core.model.workspace import State
 from .twin import TwinRunner, apply_message
 
 _PR_SET_TIMERSLACK = 29
-# steps a command-triggered step may put the twin ahead of the wall clock: an idle step runs late in
-# its period (step_margin before the deadline), so a command arriving after it would otherwise wait
-# for the next period; with 2 it is answered at once and the idle steps wait for the clock instead
+# steps a command-triggered step may put the twin ahead of the wall clock beyond where the idle steps
+# keep it: an idle step runs late in its period (step_margin before the deadline), so a command
+# arriving after it would otherwise wait for the next period; with 2 it is answered at once and the
+# idle steps wait for the clock instead. A step_margin of more than Δt keeps the twin that many steps
+# ahead of the wall clock (a buffer against late wake-ups), and the commands' lead grows with it.
 COMMAND_LEAD = 2
 # s the stepping thread blocks before each step while it is behind the wall clock: a twin that
 # cannot keep up (and on SCHED_FIFO would never leave its core) still lets the executor, the
@@ -240,6 +242,8 @@ class Stepper:
         self.outbox: collections.deque = collections.deque()
         self._lock = threading.Lock()         # a command application and a step exclude each other
         self._pending = 0                     # commands applied since the last step began
+        # steps ahead of the wall clock a command may take the twin: COMMAND_LEAD beyond the idle lead
+        self._command_lead = COMMAND_LEAD + int(config.margin // self.dt)
         self.wake = threading.Event()
         self._ready = threading.Event()
         self._t0 = 0.0                        # wall time of state 0 (perf_counter; re-anchored on overruns)
@@ -362,7 +366,7 @@ class Stepper:
                 return None
             self._pending += 1
             if (self.cfg.mode == "realtime" and self._running and not self._done()
-                    and time.perf_counter() >= self._t0 + (self._n + 1 - COMMAND_LEAD) * self.dt):
+                    and time.perf_counter() >= self._t0 + (self._n + 1 - self._command_lead) * self.dt):
                 self._pending = 0
                 snap = self._step_paced(answered=True)
         if snap is None:
@@ -413,7 +417,7 @@ class Stepper:
             while True:
                 wake.clear()
                 n = self._n            # a command may have taken this step on its own thread
-                earliest = self._t0 + (n + 1 - COMMAND_LEAD) * dt       # for a waiting command
+                earliest = self._t0 + (n + 1 - self._command_lead) * dt       # for a waiting command
                 latest = self._t0 + (n + 1) * dt - margin
                 now = clock()
                 pending = self._pending

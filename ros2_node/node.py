@@ -140,13 +140,14 @@ class TwinNode:
         self.warmup_s = 0.0
         self._services = _Services(self)
 
-        # -- executor: the C++ events executor, which only moves command messages in ---------------
-        try:
-            from rclpy.experimental import EventsExecutor
-            self.executor = EventsExecutor(context=context)
-        except Exception:          # pragma: no cover - older rclpy
-            from rclpy.executors import SingleThreadedExecutor
-            self.executor = SingleThreadedExecutor(context=context)
+        # -- executor: rclpy's C++ events executor, which only moves command messages in. Measured
+        #    against SingleThreadedExecutor (node + 1 kHz player, 80 s each, idle machine): missed
+        #    deadlines 100 vs 5153, player latency p50 1.1 vs 10.2 ms, CPU beyond the solver 63 vs
+        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its one weakness: it queues one event per
+        #    received message, so a node that cannot keep up with its commands (an overloaded
+        #    machine) grows that queue by ≈ 0.1–0.2 kB per message not kept up with (README "Memory")
+        from rclpy.experimental import EventsExecutor
+        self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
 
         # -- counters (publisher thread) ------------------------------------------------------------

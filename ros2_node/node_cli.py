@@ -103,6 +103,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--rt-priority", str(args.rt_priority)]
     if args.cpu_affinity:
         node_cmd += ["--cpu-affinity", args.cpu_affinity]
+    if args.step_margin is not None:
+        node_cmd += ["--step-margin", str(args.step_margin)]
     play_cmd = exe + ["play", args.scene, "--mode", args.mode, "--until", str(args.until), "--json", str(player_json),
                       "--quiet", "--timeout", "120", "--rate", str(args.rate)]
     print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
@@ -247,6 +249,8 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--rrd", metavar="OUT")
     d.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority of the node's stepping thread")
     d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
+    d.add_argument("--step-margin", type=float, help="s before its deadline at which the node's idle step "
+                   "starts (the node's step_margin; more than Δt keeps the twin ahead of the wall clock)")
     d.add_argument("--out", default="build/demo", help="directory of the JSON summaries")
     d.set_defaults(func=cmd_demo, verb="demo")
     for parser in (n, p, rl, d):

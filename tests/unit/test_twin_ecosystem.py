@@ -176,3 +176,32 @@ def test_frames_prefix_the_platform_frames_only(stewart):
     assert {t.header.frame_id for t in tf.transforms} == {"map"}
     assert M.platform_pose(s, 0, frames).header.frame_id == "map"
     assert M.joint_state(s).header.frame_id == "world"      # the default is unchanged
+
+
+@pytest.mark.parametrize("margin", [4e-4, 2.5e-3])
+def test_a_step_margin_beyond_dt_keeps_the_twin_ahead_and_commands_still_step_at_once(stewart, margin):
+    """step_margin > Δt: the idle steps keep the twin ≈ margin ahead of the wall clock (a buffer
+    against late wake-ups), and a command arriving then is still stepped on the receiving thread."""
+    import time
+
+    model, program = stewart
+    runner = TwinRunner(model)
+    runner.start()
+    st = Stepper(runner, StepperConfig(mode="realtime", publish_every=10, margin=margin, rt_priority=0),
+                 lambda: None)
+    st.start()
+    try:
+        leads = []
+        for _ in range(40):
+            time.sleep(0.005)
+            leads.append(runner.t - (time.perf_counter() - st._t0))
+        snap = st.submit("/t", "commands", {"data": list(program.command_lengths(0.0))}, time.perf_counter())
+    finally:
+        st.stop()
+    dt = runner.dt
+    ahead = float(np.median(leads))
+    if margin > dt:
+        assert ahead > 0.5 * margin, (ahead, leads)     # the twin runs ahead of the clock by ≈ margin
+    else:
+        assert ahead < dt + 1e-4, (ahead, leads)        # at most the step in hand
+    assert snap is not None and snap.answered           # the command's step ran at once, on this thread
