@@ -34,6 +34,7 @@ import dataclasses
 import gc
 import json
 import math
+import os
 import signal
 import sys
 import threading
@@ -61,6 +62,9 @@ _SWITCH_INTERVAL = 5.0e-5
 _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
 _LISTENER_PERIOD = 0.5
+# MB the resident set may grow after stepping began before the node says so (the measured idle
+# growth is < 1 MB per 25 min, docs/benchmarks/node_rss_soak.md)
+RSS_GROWTH_WARN_MB = 64.0
 
 # topic → what apply_message calls it
 _INPUTS = tuple((t, T.KINDS[t.name]) for t in T.INPUTS)
@@ -165,6 +169,7 @@ class TwinNode:
         self._coalesced = 0                       # states recorded but not published: a newer one was
         self._warned: dict[str, float] = {}
         self._behind_message = ""
+        self._rss_start = self._rss_max = 0.0        # MB when stepping began, the most since (publisher)
         self._last_sample = None
         self.wall_start = 0.0
         self.wall_stop = 0.0
@@ -343,6 +348,7 @@ class TwinNode:
         self._publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
         self.wall_start = time.perf_counter()
         self._cpu_start = time.process_time()
+        self._rss_start = self._rss_max = _rss_mb()
         self.stepper.start()
         self._publisher.start()
         self._threads_started = True
@@ -599,6 +605,13 @@ class TwinNode:
         if st.dropped_snapshots:
             msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_snapshots} publications "
                                                  "dropped")
+        rss = _rss_mb()
+        self._rss_max = max(self._rss_max, rss)
+        if rss - self._rss_start > RSS_GROWTH_WARN_MB:
+            msg = (msg + "; " if msg else "") + (
+                f"memory: resident set {rss:.0f} MB, {rss - self._rss_start:.0f} MB more than when stepping "
+                "began — the executor is behind its commands (rclpy's events executor queues one event per "
+                "message it has not taken yet; README 'Memory')")
         if msg:
             self._warn("behind", msg)
         self._behind_message = msg
@@ -732,6 +745,7 @@ class TwinNode:
             "published_states": self._published,
             "faults": dict(c.faults), "stopped": c.stopped,
             "cpu_time_s": self._cpu_times(wall),
+            "rss_mb": {"start": self._rss_start, "max": self._rss_max, "end": _rss_mb()},
             "record": self.p.record, "rrd": self.p.rrd, "interrupted": self.interrupted,
         }
 
@@ -816,7 +830,8 @@ class Diagnostics:
                        [("deadline_misses", st.deadline_misses), ("recent_misses", st.recent_misses),
                         ("window_steps", twin.stepper.cfg.window), ("overruns", st.overruns),
                         ("dropped_publications", st.dropped_snapshots), ("step_wall_p50_s", walls["p50"]),
-                        ("step_wall_p99_s", walls["p99"]), ("real_time_factor", twin._rtf()), ("dt", twin.dt)])
+                        ("step_wall_p99_s", walls["p99"]), ("real_time_factor", twin._rtf()), ("dt", twin.dt),
+                        ("rss_mb", round(_rss_mb(), 1)), ("rss_at_start_mb", round(twin._rss_start, 1))])
         rej, lost = dict(c.rejections), dict(twin.commands_lost)
         said = ([f"{sum(rej.values())} rejected"] if rej else []) + ([f"{sum(lost.values())} lost"] if lost else [])
         cmds = entry("commands", warn if said else ok, ", ".join(said) or "all accepted",
@@ -830,6 +845,16 @@ class Diagnostics:
         now = twin.node.get_clock().now().to_msg()
         msg.header.stamp = now
         self._pub.publish(msg)
+
+
+def _rss_mb() -> float:
+    """Resident set size of this process (MB): ``/proc/self/statm`` (Linux), else the peak."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        import resource
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _declare(node, spec, value, descriptor):

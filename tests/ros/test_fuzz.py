@@ -124,6 +124,7 @@ def test_ten_thousand_mixed_messages_are_answered_and_nothing_breaks(tmp_path, d
     assert "Traceback" not in log, log[-5000:]
     s = json.loads(summary.read_text())
     rejected = s["commands_rejected"]
+    assert 50.0 < s["rss_mb"]["start"] <= s["rss_mb"]["max"], s["rss_mb"]     # the node's resident set, MB
     # every family of bad input was seen and counted by kind
     assert {"size", "not_finite", "unknown_name"} <= set(rejected), rejected
     assert sum(rejected.values()) > MESSAGES // 10, rejected
