@@ -24,7 +24,6 @@ import json
 import os
 import platform
 import random
-import signal
 import statistics
 import subprocess
 import sys
@@ -67,8 +66,12 @@ def run_pingpong(seconds: float, rate: float) -> dict:
                             str(rate)],
                            env=env, cwd=ROOT, capture_output=True, text=True)
     finally:
-        echo.send_signal(signal.SIGINT)        # it writes its CPU time on the way out
-        echo.wait(timeout=30)
+        echo.terminate()                       # it wrote its CPU time within the last second
+        try:
+            echo.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            echo.kill()
+            echo.wait()
     if p.returncode != 0:
         raise RuntimeError(f"ping-pong player failed ({p.returncode}):\n{p.stdout[-2000:]}\n{p.stderr[-2000:]}")
     lat = json.loads(out.read_text())["latency_s"]
