@@ -62,8 +62,8 @@ _SWITCH_INTERVAL = 5.0e-5
 _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
 _LISTENER_PERIOD = 0.5
-# MB the resident set may grow after stepping began before the node says so (the measured idle
-# growth is < 1 MB per 25 min, docs/benchmarks/node_rss_soak.md)
+# MB the resident set may grow after stepping began before the node says so (measured on an idle
+# machine: flat over 8.7 min once the rings were resident, docs/benchmarks/node_rss_soak.md)
 RSS_GROWTH_WARN_MB = 64.0
 
 # topic → what apply_message calls it
@@ -147,9 +147,9 @@ class TwinNode:
         # -- executor: rclpy's C++ events executor, which only moves command messages in. Measured
         #    against SingleThreadedExecutor (node + 1 kHz player, 80 s each, idle machine): missed
         #    deadlines 100 vs 5153, player latency p50 1.1 vs 10.2 ms, CPU beyond the solver 63 vs
-        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its one weakness: it queues one event per
-        #    received message, so a node that cannot keep up with its commands (an overloaded
-        #    machine) grows that queue by ≈ 0.1–0.2 kB per message not kept up with (README "Memory")
+        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its known defect (rclpy 9.1.2): once the machine
+        #    has overloaded the node, it keeps ≈ 140 bytes per received message (allocated in its
+        #    on-new-message callback, heaptrack), even with CPU to spare again; README "Memory"
         from rclpy.experimental import EventsExecutor
         self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
@@ -610,8 +610,8 @@ class TwinNode:
         if rss - self._rss_start > RSS_GROWTH_WARN_MB:
             msg = (msg + "; " if msg else "") + (
                 f"memory: resident set {rss:.0f} MB, {rss - self._rss_start:.0f} MB more than when stepping "
-                "began — the executor is behind its commands (rclpy's events executor queues one event per "
-                "message it has not taken yet; README 'Memory')")
+                "began (known after an overload: rclpy's events executor keeps memory per received command; "
+                "README 'Memory'; restarting the node gives it back)")
         if msg:
             self._warn("behind", msg)
         self._behind_message = msg
