@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from flexmb_io.realtime import _timer_slack, apply_thread_scheduling  # noqa: E402
+from flexmb_io.realtime import timer_slack, apply_thread_scheduling  # noqa: E402
 
 THRESHOLDS_S = (3e-4, 6e-4, 1e-3, 2e-3)
 
@@ -36,7 +36,7 @@ def measure(seconds: float, period: float = 1e-3) -> dict:
     out: dict = {}
 
     def run() -> None:
-        _timer_slack(1000)
+        timer_slack(1000)
         _, notes = apply_thread_scheduling((), -1)
         out["scheduling"] = notes[0] if notes else "normal scheduler"
         ev, clock = threading.Event(), time.perf_counter

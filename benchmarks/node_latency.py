@@ -153,7 +153,8 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], jitter: dict
         f"{args.load_start[0]:.2f}, at the end {meta['load_avg_end'][0]:.2f}. Realtime mode, Δt = 1 ms, the "
         f"Stewart appendix commands at {args.rate:g} Hz (`flexmb play`, `flexmb_msgs/ActuatorCommand`, stamped), node "
         f"defaults (publish_rate 100 Hz, joint states and status also on every new command, rt_priority "
-        f"{args.rt_priority if args.rt_priority is not None else '-1: SCHED_FIFO 20 where allowed'}). "
+        f"{args.rt_priority if args.rt_priority is not None else '-1: SCHED_FIFO 20 where allowed'}, step_margin "
+        f"{args.step_margin if args.step_margin is not None else 0.0004:g} s). "
         "Latency: the player publishes a command → it receives the status echoing the command's stamp. "
         "The ping-pong is `benchmarks/dds_echo.py`: the same client, messages, QoS and executor, no solver.",
         "",

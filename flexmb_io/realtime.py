@@ -59,7 +59,7 @@ COMMAND_LEAD = 2
 BEHIND_PAUSE = 1.0e-4
 
 
-def _timer_slack(ns: int) -> bool:
+def timer_slack(ns: int) -> bool:
     """Shorten this thread's timer slack (Linux default 50 µs of lateness on every sleep)."""
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -384,7 +384,7 @@ class Stepper:
     # -- the loop ---------------------------------------------------------------------------------
     def _main(self) -> None:
         try:
-            _timer_slack(1000)
+            timer_slack(1000)
             if self.cfg.mode == "realtime":
                 warnings, notes = apply_thread_scheduling(self.cfg.cpu_affinity, self.cfg.rt_priority)
                 self.warnings += warnings

@@ -169,7 +169,8 @@ class TwinNode:
         self._coalesced = 0                       # states recorded but not published: a newer one was
         self._warned: dict[str, float] = {}
         self._behind_message = ""
-        self._rss_start = self._rss_max = 0.0        # MB when stepping began, the most since (publisher)
+        # MB when stepping began, at the last health check, the most since (publisher thread)
+        self._rss_start = self._rss_now = self._rss_max = 0.0
         self._last_sample = None
         self.wall_start = 0.0
         self.wall_stop = 0.0
@@ -348,7 +349,7 @@ class TwinNode:
         self._publisher = threading.Thread(target=self._publisher_main, name="flexmb-publish", daemon=True)
         self.wall_start = time.perf_counter()
         self._cpu_start = time.process_time()
-        self._rss_start = self._rss_max = _rss_mb()
+        self._rss_start = self._rss_now = self._rss_max = _rss_mb()
         self.stepper.start()
         self._publisher.start()
         self._threads_started = True
@@ -605,7 +606,7 @@ class TwinNode:
         if st.dropped_snapshots:
             msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_snapshots} publications "
                                                  "dropped")
-        rss = _rss_mb()
+        rss = self._rss_now = _rss_mb()
         self._rss_max = max(self._rss_max, rss)
         if rss - self._rss_start > RSS_GROWTH_WARN_MB:
             msg = (msg + "; " if msg else "") + (
@@ -831,7 +832,7 @@ class Diagnostics:
                         ("window_steps", twin.stepper.cfg.window), ("overruns", st.overruns),
                         ("dropped_publications", st.dropped_snapshots), ("step_wall_p50_s", walls["p50"]),
                         ("step_wall_p99_s", walls["p99"]), ("real_time_factor", twin._rtf()), ("dt", twin.dt),
-                        ("rss_mb", round(_rss_mb(), 1)), ("rss_at_start_mb", round(twin._rss_start, 1))])
+                        ("rss_mb", round(twin._rss_now, 1)), ("rss_at_start_mb", round(twin._rss_start, 1))])
         rej, lost = dict(c.rejections), dict(twin.commands_lost)
         said = ([f"{sum(rej.values())} rejected"] if rej else []) + ([f"{sum(lost.values())} lost"] if lost else [])
         cmds = entry("commands", warn if said else ok, ", ".join(said) or "all accepted",
