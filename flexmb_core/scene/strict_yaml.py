@@ -25,6 +25,7 @@ from ..errors import SceneError, excerpt, thousands
 from .limits import DEFAULT_LIMITS, Limits, over_limit
 
 MAX_DEPTH = 64          # a scene nests about 8 levels (members.leg.actuator.command.values[i])
+_DEEP = f"nesting deeper than {MAX_DEPTH} levels (a scene needs about 8); check for unbalanced brackets"
 
 
 class _Refused(Exception):
@@ -81,9 +82,7 @@ class StrictSceneLoader(_Base):
         self._count += 1
         try:
             if self._depth > MAX_DEPTH:
-                raise _Refused(self.peek_event().start_mark,
-                               f"nesting deeper than {MAX_DEPTH} levels (a scene needs about 8); "
-                               "check for unbalanced brackets")
+                raise _Refused(self.peek_event().start_mark, _DEEP)
             if self._count > self.max_nodes:
                 raise _TooMany(self.peek_event().start_mark, self._count)
             node = super().compose_node(parent, index)
@@ -210,6 +209,8 @@ def parse(text: str, source: str = "<string>", limits: Limits | None = None) -> 
                          limits, "counting stopped here") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
+        if "maximum nesting depth" in (exc.problem or ""):   # libyaml >= 0.2.6 (PyYAML 6.0.4) scans ahead
+            raise SceneError(_at(source, mark), _DEEP) from None    # and stops at its own depth of 1000
         what = "; ".join(excerpt(s, 200) for s in (exc.context, exc.problem) if s)
         raise SceneError(_at(source, mark), f"not valid YAML: {what}") from None
     except yaml.YAMLError as exc:
