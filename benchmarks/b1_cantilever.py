@@ -256,7 +256,7 @@ def _component_costs(model) -> dict:
 def _profile_numba(model, until: float) -> tuple[float, float, dict]:
     """Per-step µs of the numba step: total, and inside the one kernel call (dispatch included)."""
     import flexmb_core.integrators.fast as F
-    kern = F.frame_step
+    kern = F.model_step
     spent = [0]
 
     def w(*a):
@@ -266,7 +266,7 @@ def _profile_numba(model, until: float) -> tuple[float, float, dict]:
         return r
     totals, inside = [], []
     for wrapped in (False, True) * 3:
-        F.frame_step = w if wrapped else kern
+        F.model_step = w if wrapped else kern
         spent[0] = 0
         try:
             sim = Simulator(model)
@@ -276,7 +276,7 @@ def _profile_numba(model, until: float) -> tuple[float, float, dict]:
             sim.run(until)
             wall = time.perf_counter() - t0
         finally:
-            F.frame_step = kern
+            F.model_step = kern
         (inside if wrapped else totals).append((wall / sim.stats.steps * 1e6, spent[0] / sim.stats.steps / 1000))
     counts = {"iterations": sim.stats.iterations_total / max(sim.stats.steps, 1), "tangents": sim._dynamic.tangent_updates /
               sim.stats.steps}

@@ -2,7 +2,7 @@
 
 Numba validates a cached kernel against the timestamp and size of the file that *defines* it, not
 of the files whose functions it calls: after an edit of ``kernels/frame3d.py`` the cached
-``integrators/fast.frame_step`` still holds the old frame kernel inlined (measured: material
+``integrators/fast.model_step`` still holds the old frame kernel inlined (measured: material
 damping silently vanished from the numba step). So the package keeps one digest of all its
 sources next to the cache; when it differs, every cached kernel of this package is removed and
 recompiled on first use. Other projects' entries in a shared ``NUMBA_CACHE_DIR`` are left alone.

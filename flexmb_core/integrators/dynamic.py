@@ -38,7 +38,7 @@ from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
 from .energy import compact_csr, csr_matvec, energies
-from .fast import FastFrameStep
+from .fast import NumbaStep
 from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
 
 
@@ -92,7 +92,7 @@ class DynamicIntegrator:
         self.guard = StepGuard(model, tolerance=spec.tolerance)
         # One numba call per step when it covers the model (bit-identical to _newton; None: the
         # Python path; set it to None to force that path).
-        self.fast = None if FastFrameStep.unsupported(model, spec) else FastFrameStep(self)
+        self.fast = None if NumbaStep.unsupported(model, spec) else NumbaStep(self)
         self._c_p = np.zeros(model.n_multipliers)   # constraint violations at the Newton start
 
     @property

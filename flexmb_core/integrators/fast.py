@@ -1,21 +1,28 @@
-"""One numba call per time step for the common frame-only model (the B1 cantilever kind).
+"""One numba call per time step: the Newton attempt of a dynamic step, for every element kind.
 
-:class:`FastFrameStep` runs the first Newton attempt of a step of
-:class:`~flexmb_core.integrators.dynamic.DynamicIntegrator` entirely inside :func:`frame_step`:
-predictor, residual and (held or refreshed) tangent of the frame group, the inertial residual,
-the skyline LU factor and solve, the modified-Newton refresh rule, the rates, the energies and
-the step guard's checks. It calls the very kernels the Python path calls, in the same order, so
-its results are bit-identical to it (``tests/unit/test_fast_step.py``); it only removes the
-Python between them (≈ 70 µs per step on B1 before, see ``docs/benchmarks/b1_profile.md``).
+:class:`NumbaStep` runs the first Newton attempt of a step of
+:class:`~flexmb_core.integrators.dynamic.DynamicIntegrator` entirely inside :func:`model_step`:
+predictor and driven supports, the residual and (held or refreshed) tangent of every frame group,
+the bars, every shell group, the multiplier constraints (rigid corners, off-plane hinges, director
+ties) and the moment loads, the inertial residual, the skyline LU factor and solve, the
+modified-Newton refresh rule, the rates, the energies and the step guard's checks. It calls the
+very kernels the Python path calls, in the same order, so the states it produces are bit-identical
+to it (``tests/unit/test_fast_step.py``); it only removes the Python between them.
 
-It covers a model with exactly one frame group and nothing else that the step would have to
-evaluate in Python: no trusses, shells, actuators, drives, moment loads, multipliers (rigid
-corners, hinges, ties), command programs or material damping, and the Newmark or Arnold–Brüls
-generalized-α integrator. :func:`FastFrameStep.unsupported` names what is missing otherwise and
-the integrator keeps its Python path. A step the kernel cannot finish — no convergence, a refused
-root, a pivot the skyline LU must not take (the Python path then pivots with SuperLU) — leaves the
-state as it was and hands back to the integrator, whose ``on_unconverged`` policy proceeds as for
-any failed attempt.
+Not covered (:meth:`NumbaStep.unsupported` names it and the integrator keeps its Python path):
+the Chung–Hulbert integrator (kept to show it is not objective) and ``on_unconverged:
+accept_flagged``. A step the kernel cannot finish — no convergence, a refused root, a pivot the
+skyline LU must not take (the Python path then pivots with SuperLU) — leaves the state as it was
+and hands back to the integrator, whose ``on_unconverged`` policy proceeds as for any failed
+attempt; sub-steps run in the Python path.
+
+Arguments. A step needs about 150 arrays, and every array argument of a numba call costs
+dispatch time (≈ 0.1 µs), so they travel in four flat packs — read-only floats ``cf`` and ints
+``ci`` (model arrays, read-only like the model's so that the kernels called inside keep their one
+compiled signature), writable floats ``wf`` and ints ``wi`` (scratch, the skyline structure) —
+with a layout table ``lay``: row ``[offset, d0, d1, d2, d3, size]`` per item. Items of the whole
+model are rows ``L_*``; frame group ``k`` has rows ``F0 + k·NF + F_*`` and shell group ``k`` rows
+``S0 + k·NS + S_*`` (``F0, S0`` and the group counts in the step constants).
 """
 
 from __future__ import annotations
@@ -25,11 +32,16 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.extending import register_jitable
 
+from ..kernels.constraints import director_tie_group, hinge_group, rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_scratch, frame_structure
-from ..kernels.guard import dynamic_guard, frame_orientation
+from ..kernels.guard import conservative_moment_work, dynamic_guard, frame_orientation
+from ..kernels.moments import conservative_moments, follower_moments
+from ..kernels.shell import shell_group, shell_scratch
 from ..kernels.truss import truss_group
-from ..model.model import FrameGroup, Model, TrussGroup
+from ..model.assembly import apply_drives
+from ..model.model import Model, TrussGroup
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
 from ..solvers.banded import _factor_kernel, _solve_kernel
@@ -37,132 +49,193 @@ from ..solvers.result import StepResult
 from .energy import _energies
 from .fused import apply_increment, inertial_residual, update_rates, velocity_at
 
-# Return codes of frame_step.
+# Return codes of model_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
 
-# Items of the packed arguments (rows of the layout table: offset, dims d0…d3, size). Read-only
-# float pack ``cf``: model arrays (read-only like the model's, so the kernels called inside keep
-# their one compiled signature) and the step constants. Read-only int pack ``ci``. Writable float
-# pack ``wf``: arrays the Python path passes writable (copies) and the step's scratch. Writable
-# int pack ``wi``: the skyline LU's symbolic structure and other writable index arrays.
-(L_DSCALE, L_Q0, L_GRAV, L_DAX, L_DSEC, L_W, L_MAT, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU,     # cf
- L_FREE, L_EDOFS, L_ACT, L_SMAP, L_MI, L_MJ, L_TEDOFS, L_TACT, L_TSMAP,              # ci
- L_INVS, L_MASSK, L_PHIST, L_DPHIST, L_SPT, L_HACC, L_GACC, L_TK, L_TG, L_D, L_FP, L_FD, L_EP, L_ED, L_BMAT,
- L_BDOT, L_GBAR, L_GDOT, L_QE, L_VE, L_RE, L_KE, L_KN, L_GPHI, L_GDPHI, L_GIDET, L_GILEN, L_VEVAL,
- L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK, L_TQE, L_TVE, L_TRE, L_TKE,          # wf
- L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_STRAIGHT,
- L_BLOCKS, L_DRIVE,                                                               # wi
- N_ITEMS) = range(74)
+# Items of the whole model (rows of the layout table).
+(L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
+ L_FMBODY, L_CAXES, L_CMAG,                                                                   # cf
+ L_FREE, L_MI, L_MJ, L_TEDOFS, L_TACT, L_TSMAP, L_CDOFS, L_CSMAP, L_HDOFS, L_HSMAP, L_TIEDOFS, L_TIESMAP,
+ L_FVDOFS, L_FSMAP, L_MVDOFS, L_MSMAP, L_DRVIDX,                                              # ci
+ L_INVS, L_MASSK, L_VEVAL, L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK, L_TQE, L_TVE, L_TRE, L_TKE,
+ L_SDV, L_SDFA, L_SF, L_SBMAT, L_SCB, L_SQE, L_SRE, L_SKE, L_CKE, L_HKE, L_TIEKE, L_RC, L_CP, L_MULTN,
+ L_FSCALE, L_MSCALE, L_RM, L_QL, L_KDUMMY, L_DRVVAL,                                          # wf
+ L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_DRIVE,   # wi
+ N_ITEMS) = range(78)
+# Items of one frame group (rows F0 + k·NF + item).
+(F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
+ F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
+ F_PHIST, F_DPHIST, F_SPT, F_HACC, F_GACC, F_TK, F_TG, F_D, F_FP, F_FD, F_EP, F_ED, F_BMAT, F_BDOT, F_GBAR,
+ F_GDOT, F_QE, F_VE, F_RE, F_KE, F_KN, F_GPHI, F_GDPHI, F_GIDET, F_GILEN,                     # wf
+ F_STRAIGHT, F_BLOCKS,                                                                        # wi
+ NF) = range(36)
+# Items of one shell group (rows S0 + k·NS + item).
+S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, NS = range(9)
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
- P_CMASS, P_PIVTOL, P_MINPIV, P_NSEC, P_ACCUM, P_DAMPED, N_PAR) = range(20)
+ P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, N_PAR) = range(24)
 # Output slots of io.
-(IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, N_IO) = range(13)
+(IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, IO_GROUP,
+ N_IO) = range(14)
+
+
+# Views of a pack (register_jitable: inlined into the caller, so that a view of a read-only and
+# of a writable pack are not two signatures of one dispatcher).
+@register_jitable
+def _v1(p, row):
+    return p[row[0]:row[0] + row[5]]
+
+
+@register_jitable
+def _v2(p, row):
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2]))
+
+
+@register_jitable
+def _v3(p, row):
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3]))
+
+
+@register_jitable
+def _v4(p, row):
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3], row[4]))
 
 
 @njit(cache=True, nogil=True)
-def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf, ci, wf, wi, lay,
-               tan, led, io, t_n, dt, guarded, balance):
-    """First Newton attempt of one dynamic step of a frame/truss model (see the module).
+def _assemble(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci, wf, wi, lay, par):
+    """Internal forces (+ multiplier forces, − moment loads) into ``r`` and their tangent into
+    ``kdata`` when ``refresh``, in :func:`flexmb_core.model.assembly.assemble`'s order (the sums
+    bit-identical); the violations into the ``L_RC`` item. Returns (strain energy, dissipation)."""
+    for i in range(r.size):
+        r[i] = 0.0
+    if refresh:
+        for i in range(kdata.size):
+            kdata[i] = 0.0
+    strain = 0.0
+    diss = 0.0
+    f0 = int(par[P_F0])
+    for k in range(int(par[P_NFG])):
+        b = f0 + k * NF
+        u, dp = frame_group(q, v_k, _v2(ci, lay[b + F_EDOFS]), _v4(cf, lay[b + F_DAX]), _v4(cf, lay[b + F_DSEC]),
+                            _v2(cf, lay[b + F_W]), ci[lay[b + F_NSEC, 0]], _v2(cf, lay[b + F_MAT]),
+                            _v1(ci, lay[b + F_ACT]), lam, lam_rate, c_vk, _v2(ci, lay[b + F_SMAP]), refresh, no_dlam,
+                            r, kdata, _v3(wf, lay[b + F_D]), _v3(wf, lay[b + F_FP]), _v3(wf, lay[b + F_FD]),
+                            _v2(wf, lay[b + F_EP]), _v2(wf, lay[b + F_ED]), _v2(wf, lay[b + F_BMAT]),
+                            _v2(wf, lay[b + F_BDOT]), _v2(wf, lay[b + F_GBAR]), _v2(wf, lay[b + F_GDOT]),
+                            _v1(wf, lay[b + F_QE]), _v1(wf, lay[b + F_VE]), _v1(wf, lay[b + F_RE]),
+                            _v2(wf, lay[b + F_KE]), _v2(wf, lay[b + F_KN]), _v1(wi, lay[b + F_STRAIGHT]),
+                            _v3(wf, lay[b + F_PHIST]), _v3(wf, lay[b + F_DPHIST]), _v3(wf, lay[b + F_SPT]),
+                            _v3(wi, lay[b + F_BLOCKS]), _v3(wf, lay[b + F_HACC]), _v1(wf, lay[b + F_GACC]),
+                            _v4(wf, lay[b + F_TK]), _v2(wf, lay[b + F_TG]))
+        strain += u
+        diss += dp
+    t_edofs = _v2(ci, lay[L_TEDOFS])
+    if t_edofs.shape[0]:
+        u, dp = truss_group(q, v_k, t_edofs, _v1(cf, lay[L_TL0]), _v1(cf, lay[L_TEA]), _v1(cf, lay[L_TTAU]),
+                            _v1(ci, lay[L_TACT]), lam, lam_rate, c_vk, _v2(ci, lay[L_TSMAP]), refresh, r, kdata,
+                            _v1(wf, lay[L_TQE]), _v1(wf, lay[L_TVE]), _v1(wf, lay[L_TRE]), _v2(wf, lay[L_TKE]))
+        strain += u
+        diss += dp
+    s0 = int(par[P_S0])
+    for k in range(int(par[P_NSG])):
+        b = s0 + k * NS
+        strain += shell_group(q, _v2(ci, lay[b + S_EDOFS]), _v2(cf, lay[b + S_PHI]), _v3(cf, lay[b + S_DPHI]),
+                              _v1(cf, lay[b + S_ZETA]), _v4(cf, lay[b + S_A0INV]), _v2(cf, lay[b + S_W]),
+                              _v2(cf, lay[b + S_MAT]), _v2(ci, lay[b + S_SMAP]), refresh, r, kdata,
+                              _v2(wf, lay[L_SDV]), _v3(wf, lay[L_SDFA]), _v2(wf, lay[L_SF]), _v2(wf, lay[L_SBMAT]),
+                              _v2(wf, lay[L_SCB]), _v1(wf, lay[L_SQE]), _v1(wf, lay[L_SRE]), _v2(wf, lay[L_SKE]))
+    rc = _v1(wf, lay[L_RC])
+    c_dofs = _v2(ci, lay[L_CDOFS])
+    h_dofs = _v2(ci, lay[L_HDOFS])
+    tie_dofs = _v2(ci, lay[L_TIEDOFS])
+    nc = c_dofs.shape[0]
+    if nc:
+        rigid_corner_group(q, mult, c_dofs, _v3(cf, lay[L_CALPHA]), _v2(ci, lay[L_CSMAP]), refresh, r, rc, kdata,
+                           _v2(wf, lay[L_CKE]))
+    if h_dofs.shape[0]:
+        hinge_group(q, mult, 6 * nc, h_dofs, _v2(cf, lay[L_HALPHA]), _v3(cf, lay[L_HBETA]), _v2(ci, lay[L_HSMAP]),
+                    refresh, r, rc, kdata, _v2(wf, lay[L_HKE]))
+    if tie_dofs.shape[0]:
+        director_tie_group(q, mult, 6 * nc + 2 * h_dofs.shape[0], tie_dofs, _v2(cf, lay[L_TIEALPHA]),
+                           _v2(ci, lay[L_TIESMAP]), refresh, r, rc, kdata, _v2(wf, lay[L_TIEKE]))
+    f_vdofs = _v2(ci, lay[L_FVDOFS])
+    if f_vdofs.shape[0]:
+        follower_moments(q, f_vdofs, _v2(cf, lay[L_FMBODY]), _v1(wf, lay[L_FSCALE]), _v2(ci, lay[L_FSMAP]), refresh,
+                         r, kdata)
+    m_vdofs = _v2(ci, lay[L_MVDOFS])
+    if m_vdofs.shape[0]:
+        conservative_moments(q, m_vdofs, _v3(cf, lay[L_CAXES]), _v1(cf, lay[L_CMAG]), _v1(wf, lay[L_MSCALE]),
+                             _v2(ci, lay[L_MSMAP]), refresh, r, kdata)
+    return strain, diss
 
-    State ``q, v, a, atil (ndof,)`` is advanced in place on success and left unchanged
-    otherwise. ``lam, lam_rate (na,)``: the actuator stretches λ_{n+1} and their rates (1/s,
-    read by damped elements only), set by the caller. ``balance``: the step moves no actuator,
-    so the guard's energy balance (check 3) applies. The GIL is released: a caller's other
-    threads (the node's executor) run while the step does. Shared with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller),
-    ``r`` (internal force of the last evaluation), the skyline factors ``env, inv_diag,
-    lu_stats`` (the held tangent) and the step guard's ledger rows ``gvec, react``. Everything
-    else comes in four packs and their layout table ``lay`` (see the ``L_*`` items): every array
-    argument costs dispatch time (≈ 0.1 µs), and a step has about a hundred of them.
+
+@njit(cache=True, nogil=True)
+def _moment_work(q, q_p, no_k, cf, ci, wf, lay):
+    """Work of the moment loads from ``q_p`` to ``q`` (J), as
+    :meth:`~flexmb_core.solvers.guard.StepGuard.moment_work` forms it (its follower part sums
+    ``r·(q_p − q)`` in a loop where numpy's dot sums pairwise: the last bits of a guard value
+    may differ, never a state)."""
+    w = 0.0
+    m_vdofs = _v2(ci, lay[L_MVDOFS])
+    if m_vdofs.shape[0]:
+        w += conservative_moment_work(q, q_p, m_vdofs, _v3(cf, lay[L_CAXES]), _v1(cf, lay[L_CMAG]),
+                                      _v1(wf, lay[L_MSCALE]))
+    f_vdofs = _v2(ci, lay[L_FVDOFS])
+    if f_vdofs.shape[0]:
+        rm = _v1(wf, lay[L_RM])
+        for i in range(rm.size):
+            rm[i] = 0.0
+        for x in (q_p, q):
+            follower_moments(x, f_vdofs, _v2(cf, lay[L_FMBODY]), _v1(wf, lay[L_FSCALE]), _v2(ci, lay[L_FSMAP]),
+                             no_k, rm, _v1(wf, lay[L_KDUMMY]))
+        s = 0.0
+        for i in range(rm.size):
+            s += rm[i] * (q_p[i] - q[i])
+        w += 0.5 * s
+    return w
+
+
+@njit(cache=True, nogil=True)
+def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf, ci, wf, wi,
+               lay, tan, led, io, t_n, dt, guarded, balance):
+    """First Newton attempt of one dynamic step (see the module).
+
+    State ``q, v, a, atil (ndof,)`` and the multipliers ``mult (nmult,)`` are advanced in place on
+    success and left unchanged otherwise. ``lam, lam_rate (na,)``: the actuator stretches
+    λ_{n+1} and their rates (1/s, read by damped elements only), set by the caller. ``balance``:
+    the step moves no actuator, so the guard's energy balance (check 3) applies. The GIL is
+    released: a caller's other threads (the node's executor) run while the step does. Shared
+    with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller), ``r`` (internal
+    force of the last evaluation), the skyline factors ``env, inv_diag, lu_stats`` (the held
+    tangent) and the step guard's ledger rows ``gvec, react``. Everything else comes in the
+    packs ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes
+    the driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
 
     ``tan`` in/out: the integrator's held tangent [held, coefficient, age, refreshes]; ``led``
     in/out: the guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is
     accepted); ``t_n, dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
     iterations, relative residual, increment, strain, kinetic and gravity energy, the guard's
-    values (x, y, e_end, aux: element of an inverted section or the energy check's code) and the
-    strain energy at the Newton start.
+    values (x, y, e_end, aux: element of an inverted section or the energy check's code, and the
+    frame group of that section) and the strain energy at the Newton start.
 
     Returns one of the codes ``OK, NO_CONVERGENCE, …, ENERGY``.
     """
-    # -- unpack (views, no copies) --------------------------------------------------------------
-    o = lay[L_DSCALE, 0]; dof_scale = cf[o:o + lay[L_DSCALE, 5]]
-    o = lay[L_Q0, 0]; q0 = cf[o:o + lay[L_Q0, 5]]
-    o = lay[L_GRAV, 0]; gravity = cf[o:o + lay[L_GRAV, 5]]
-    o = lay[L_DAX, 0]
-    dax = cf[o:o + lay[L_DAX, 5]].reshape((lay[L_DAX, 1], lay[L_DAX, 2], lay[L_DAX, 3], lay[L_DAX, 4]))
-    o = lay[L_DSEC, 0]
-    dsec = cf[o:o + lay[L_DSEC, 5]].reshape((lay[L_DSEC, 1], lay[L_DSEC, 2], lay[L_DSEC, 3], lay[L_DSEC, 4]))
-    o = lay[L_W, 0]; w = cf[o:o + lay[L_W, 5]].reshape((lay[L_W, 1], lay[L_W, 2]))
-    o = lay[L_MAT, 0]; mat = cf[o:o + lay[L_MAT, 5]].reshape((lay[L_MAT, 1], lay[L_MAT, 2]))
-    o = lay[L_PAR, 0]; par = cf[o:o + lay[L_PAR, 5]]
-    o = lay[L_TL0, 0]; t_l0 = cf[o:o + lay[L_TL0, 5]]
-    o = lay[L_TEA, 0]; t_ea = cf[o:o + lay[L_TEA, 5]]
-    o = lay[L_TTAU, 0]; t_tau = cf[o:o + lay[L_TTAU, 5]]
-    o = lay[L_TEDOFS, 0]; t_edofs = ci[o:o + lay[L_TEDOFS, 5]].reshape((lay[L_TEDOFS, 1], lay[L_TEDOFS, 2]))
-    o = lay[L_TACT, 0]; t_act = ci[o:o + lay[L_TACT, 5]]
-    o = lay[L_TSMAP, 0]; t_smap = ci[o:o + lay[L_TSMAP, 5]].reshape((lay[L_TSMAP, 1], lay[L_TSMAP, 2]))
-    o = lay[L_TQE, 0]; t_qe = wf[o:o + lay[L_TQE, 5]]
-    o = lay[L_TVE, 0]; t_ve = wf[o:o + lay[L_TVE, 5]]
-    o = lay[L_TRE, 0]; t_re = wf[o:o + lay[L_TRE, 5]]
-    o = lay[L_TKE, 0]; t_ke = wf[o:o + lay[L_TKE, 5]].reshape((lay[L_TKE, 1], lay[L_TKE, 2]))
-    o = lay[L_VEVAL, 0]; v_eval = wf[o:o + lay[L_VEVAL, 5]]
-    o = lay[L_FREE, 0]; free = ci[o:o + lay[L_FREE, 5]]
-    o = lay[L_EDOFS, 0]; edofs = ci[o:o + lay[L_EDOFS, 5]].reshape((lay[L_EDOFS, 1], lay[L_EDOFS, 2]))
-    o = lay[L_ACT, 0]; act = ci[o:o + lay[L_ACT, 5]]
-    o = lay[L_SMAP, 0]; smap = ci[o:o + lay[L_SMAP, 5]].reshape((lay[L_SMAP, 1], lay[L_SMAP, 2]))
-    o = lay[L_INVS, 0]; inv_scale = wf[o:o + lay[L_INVS, 5]]
-    o = lay[L_MV, 0]; m_data = cf[o:o + lay[L_MV, 5]]
-    o = lay[L_MASSK, 0]; mass_kdata = wf[o:o + lay[L_MASSK, 5]]
-    o = lay[L_PHIST, 0]
-    phi_st = wf[o:o + lay[L_PHIST, 5]].reshape((lay[L_PHIST, 1], lay[L_PHIST, 2], lay[L_PHIST, 3]))
-    o = lay[L_DPHIST, 0]
-    dphi_st = wf[o:o + lay[L_DPHIST, 5]].reshape((lay[L_DPHIST, 1], lay[L_DPHIST, 2], lay[L_DPHIST, 3]))
-    o = lay[L_SPT, 0]; s_pt = wf[o:o + lay[L_SPT, 5]].reshape((lay[L_SPT, 1], lay[L_SPT, 2], lay[L_SPT, 3]))
-    o = lay[L_HACC, 0]; hacc = wf[o:o + lay[L_HACC, 5]].reshape((lay[L_HACC, 1], lay[L_HACC, 2], lay[L_HACC, 3]))
-    o = lay[L_GACC, 0]; gacc = wf[o:o + lay[L_GACC, 5]]
-    o = lay[L_TK, 0]; tk = wf[o:o + lay[L_TK, 5]].reshape((lay[L_TK, 1], lay[L_TK, 2], lay[L_TK, 3], lay[L_TK, 4]))
-    o = lay[L_TG, 0]; tg = wf[o:o + lay[L_TG, 5]].reshape((lay[L_TG, 1], lay[L_TG, 2]))
-    o = lay[L_D, 0]; d = wf[o:o + lay[L_D, 5]].reshape((lay[L_D, 1], lay[L_D, 2], lay[L_D, 3]))
-    o = lay[L_FP, 0]; fp = wf[o:o + lay[L_FP, 5]].reshape((lay[L_FP, 1], lay[L_FP, 2], lay[L_FP, 3]))
-    o = lay[L_FD, 0]; fd = wf[o:o + lay[L_FD, 5]].reshape((lay[L_FD, 1], lay[L_FD, 2], lay[L_FD, 3]))
-    o = lay[L_EP, 0]; ep = wf[o:o + lay[L_EP, 5]].reshape((lay[L_EP, 1], lay[L_EP, 2]))
-    o = lay[L_ED, 0]; ed = wf[o:o + lay[L_ED, 5]].reshape((lay[L_ED, 1], lay[L_ED, 2]))
-    o = lay[L_BMAT, 0]; bmat = wf[o:o + lay[L_BMAT, 5]].reshape((lay[L_BMAT, 1], lay[L_BMAT, 2]))
-    o = lay[L_BDOT, 0]; bdot = wf[o:o + lay[L_BDOT, 5]].reshape((lay[L_BDOT, 1], lay[L_BDOT, 2]))
-    o = lay[L_GBAR, 0]; gbar = wf[o:o + lay[L_GBAR, 5]].reshape((lay[L_GBAR, 1], lay[L_GBAR, 2]))
-    o = lay[L_GDOT, 0]; gdot = wf[o:o + lay[L_GDOT, 5]].reshape((lay[L_GDOT, 1], lay[L_GDOT, 2]))
-    o = lay[L_QE, 0]; qe = wf[o:o + lay[L_QE, 5]]
-    o = lay[L_VE, 0]; ve = wf[o:o + lay[L_VE, 5]]
-    o = lay[L_RE, 0]; re = wf[o:o + lay[L_RE, 5]]
-    o = lay[L_KE, 0]; ke = wf[o:o + lay[L_KE, 5]].reshape((lay[L_KE, 1], lay[L_KE, 2]))
-    o = lay[L_KN, 0]; kn = wf[o:o + lay[L_KN, 5]].reshape((lay[L_KN, 1], lay[L_KN, 2]))
-    o = lay[L_GPHI, 0]; gphi = wf[o:o + lay[L_GPHI, 5]].reshape((lay[L_GPHI, 1], lay[L_GPHI, 2]))
-    o = lay[L_GDPHI, 0]; gdphi = wf[o:o + lay[L_GDPHI, 5]].reshape((lay[L_GDPHI, 1], lay[L_GDPHI, 2]))
-    o = lay[L_GIDET, 0]; inv_det0 = wf[o:o + lay[L_GIDET, 5]].reshape((lay[L_GIDET, 1], lay[L_GIDET, 2]))
-    o = lay[L_GILEN, 0]; inv_len0 = wf[o:o + lay[L_GILEN, 5]].reshape((lay[L_GILEN, 1], lay[L_GILEN, 2]))
-    o = lay[L_WBUF, 0]; w_buf = wf[o:o + lay[L_WBUF, 5]]
-    o = lay[L_RF, 0]; rf = wf[o:o + lay[L_RF, 5]]
-    o = lay[L_DQ, 0]; dq = wf[o:o + lay[L_DQ, 5]]
-    o = lay[L_KDATA, 0]; kdata = wf[o:o + lay[L_KDATA, 5]]
-    o = lay[L_IVEC, 0]; ivec = wf[o:o + lay[L_IVEC, 5]].reshape((lay[L_IVEC, 1], lay[L_IVEC, 2]))
-    o = lay[L_LUWORK, 0]; lu_work = wf[o:o + lay[L_LUWORK, 5]]
-    o = lay[L_MI, 0]; m_indptr = ci[o:o + lay[L_MI, 5]]
-    o = lay[L_MJ, 0]; m_indices = ci[o:o + lay[L_MJ, 5]]
-    o = lay[L_SLOT, 0]; slot = wi[o:o + lay[L_SLOT, 5]]
-    o = lay[L_ZSLOT, 0]; zero_slots = wi[o:o + lay[L_ZSLOT, 5]]
-    o = lay[L_BASE, 0]; base = wi[o:o + lay[L_BASE, 5]]
-    o = lay[L_LRP, 0]; lrun_ptr = wi[o:o + lay[L_LRP, 5]]
-    o = lay[L_LRL, 0]; lrun_lo = wi[o:o + lay[L_LRL, 5]]
-    o = lay[L_LRH, 0]; lrun_hi = wi[o:o + lay[L_LRH, 5]]
-    o = lay[L_URP, 0]; urun_ptr = wi[o:o + lay[L_URP, 5]]
-    o = lay[L_URL, 0]; urun_lo = wi[o:o + lay[L_URL, 5]]
-    o = lay[L_URH, 0]; urun_hi = wi[o:o + lay[L_URH, 5]]
-    o = lay[L_BLK, 0]; blk_ptr = wi[o:o + lay[L_BLK, 5]]
-    o = lay[L_PERM, 0]; perm = wi[o:o + lay[L_PERM, 5]]
-    o = lay[L_STRAIGHT, 0]; straight = wi[o:o + lay[L_STRAIGHT, 5]]
-    o = lay[L_BLOCKS, 0]
-    blocks = wi[o:o + lay[L_BLOCKS, 5]].reshape((lay[L_BLOCKS, 1], lay[L_BLOCKS, 2], lay[L_BLOCKS, 3]))
-    o = lay[L_DRIVE, 0]; drive_ids = wi[o:o + lay[L_DRIVE, 5]]
+    par = _v1(cf, lay[L_PAR])
+    free = _v1(ci, lay[L_FREE])
+    m_indptr = _v1(ci, lay[L_MI])
+    m_indices = _v1(ci, lay[L_MJ])
+    m_data = _v1(cf, lay[L_MV])
+    ivec = _v2(wf, lay[L_IVEC])
+    rf = _v1(wf, lay[L_RF])
+    dq = _v1(wf, lay[L_DQ])
+    kdata = _v1(wf, lay[L_KDATA])
+    rc = _v1(wf, lay[L_RC])
+    c_p = _v1(wf, lay[L_CP])
+    mult_n = _v1(wf, lay[L_MULTN])
+    inv_scale = _v1(wf, lay[L_INVS])
+    v_eval = _v1(wf, lay[L_VEVAL])
+    drv_idx = _v1(ci, lay[L_DRVIDX])
+    drv_val = _v1(wf, lay[L_DRVVAL])
     am = par[P_AM]
     af = par[P_AF]
     beta = par[P_BETA]
@@ -173,11 +246,13 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
     modified = par[P_MODIFIED] != 0.0
     contraction = par[P_CONTRACTION]
     max_age = int(par[P_MAXAGE])
-    nsec = int(par[P_NSEC])
     accumulate = par[P_ACCUM] != 0.0
     pivot_tol = par[P_PIVTOL]
     min_pivot_ratio = par[P_MINPIV]
     damped = par[P_DAMPED] != 0.0
+    nmult = int(par[P_NMULT])
+    nfg = int(par[P_NFG])
+    f0 = int(par[P_F0])
 
     # -- predictor (Python path: DynamicIntegrator._newton) -------------------------------------
     n = q.size
@@ -203,9 +278,13 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
         h += q_n[i]
         h += dt * v_n[i]
         q_hat[i] = h
+    for i in range(nmult):
+        mult_n[i] = mult[i]
     for k in range(nf):
         i = free[k]
         q[i] = q_hat[i] + c_bdt * at_n[i]
+    for k in range(drv_idx.size):       # driven supports at t_{n+1} (apply_drives, by the caller)
+        q[drv_idx[k]] = drv_val[k]
     for i in range(n):
         q_p[i] = q[i]
     coef = c_a + c_m * c_v
@@ -223,46 +302,38 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
     # Undamped: the rates are not read, and the stretch rates and c_v are zero as in
     # assembly.assemble's undamped call (ws.zero_v, ws.zero_lam_rate).
     c_vk = c_v if damped else 0.0
-    # a bool from data, not the literal False: a literal argument compiles a second signature of
-    # frame_group and its element kernels (tests/unit/test_signatures.py)
+    # bools from data, not the literal False: a literal argument compiles a second signature of
+    # the kernels it is passed to (tests/unit/test_signatures.py)
     no_dlam = dt < 0.0
-    v_k = v_eval if damped else ve
+    v_k = v_eval        # undamped: stays zero (ws.zero_v of the Python path), the kernels do not read it
     # -- Newton ------------------------------------------------------------------------------------
     for it in range(1, max_it + 1):
-        for i in range(n):
-            r[i] = 0.0
-        if refresh:
-            for i in range(kdata.size):
-                kdata[i] = 0.0
         if damped:
             velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, 0.0, v_eval)
-        # the sums in assembly.assemble's order: frame group, then bars (bit-identical)
-        strain = 0.0
-        diss = 0.0
-        u_g, dp_g = frame_group(q, v_k, edofs, dax, dsec, w, nsec, mat, act, lam, lam_rate, c_vk, smap,
-                                refresh, no_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve,
-                                re, ke, kn, straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg)
-        strain += u_g
-        diss += dp_g
-        if t_edofs.shape[0]:
-            u_g, dp_g = truss_group(q, v_k, t_edofs, t_l0, t_ea, t_tau, t_act, lam, lam_rate, c_vk, t_smap,
-                                    refresh, r, kdata, t_qe, t_ve, t_re, t_ke)
-            strain += u_g
-            diss += dp_g
+        strain, diss = _assemble(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci, wf, wi,
+                                 lay, par)
         keep = it == 1 and guarded
         nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
-                                    m_indptr, m_indices, m_data, r, f_ext, free, w_buf, rf, keep, g_p)
+                                    m_indptr, m_indices, m_data, r, f_ext, free, _v1(wf, lay[L_WBUF]), rf, keep, g_p)
         rel = nr / ref
         if keep:
             u_p = strain
             diss_p = diss
+            for i in range(nmult):
+                c_p[i] = rc[i]
+        viol = 0.0
+        for i in range(nmult):
+            rf[nf + i] = rc[i]
+            if abs(rc[i]) > viol:
+                viol = abs(rc[i])
         if not math.isfinite(nr):
             code = NON_FINITE_RESIDUAL
             break
         if refresh:
-            step = _factor_kernel(kdata, mass_kdata, coef, slot, accumulate, zero_slots, base, lrun_ptr,
-                                  lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag,
-                                  pivot_tol, lu_stats)
+            step = _factor_kernel(kdata, _v1(wf, lay[L_MASSK]), coef, _v1(wi, lay[L_SLOT]), accumulate,
+                                  _v1(wi, lay[L_ZSLOT]), _v1(wi, lay[L_BASE]), _v1(wi, lay[L_LRP]),
+                                  _v1(wi, lay[L_LRL]), _v1(wi, lay[L_LRH]), _v1(wi, lay[L_URP]), _v1(wi, lay[L_URL]),
+                                  _v1(wi, lay[L_URH]), _v1(wi, lay[L_BLK]), env, inv_diag, pivot_tol, lu_stats)
             if step >= 0 or not lu_stats[0] > 0.0 or lu_stats[1] < min_pivot_ratio * lu_stats[0]:
                 tan[0] = 0.0
                 code = PIVOT
@@ -271,13 +342,16 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
             tan[1] = coef
             tan[2] = 0.0
             tan[3] += 1.0
-        _solve_kernel(rf, perm, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env, inv_diag,
-                      lu_work, dq)
+        _solve_kernel(rf, _v1(wi, lay[L_PERM]), _v1(wi, lay[L_BASE]), _v1(wi, lay[L_LRP]), _v1(wi, lay[L_LRL]),
+                      _v1(wi, lay[L_LRH]), _v1(wi, lay[L_URP]), _v1(wi, lay[L_URL]), _v1(wi, lay[L_URH]), env,
+                      inv_diag, _v1(wf, lay[L_LUWORK]), dq)
         inc = apply_increment(q, free, dq, -1.0, inv_scale)
+        for i in range(nmult):
+            mult[i] -= dq[nf + i]
         if not math.isfinite(inc):
             code = NON_FINITE_INCREMENT
             break
-        if inc <= tol:
+        if inc <= tol and viol <= tol:
             code = OK
             break
         refresh = (not modified) or inc > contraction * prev_inc
@@ -286,37 +360,61 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
     kin = 0.0
     grav = 0.0
     if code == OK:
-        kin, grav = _energies(m_indptr, m_indices, m_data, v, q, q0, gravity)
+        kin, grav = _energies(m_indptr, m_indices, m_data, v, q, _v1(cf, lay[L_Q0]), _v1(cf, lay[L_GRAV]))
     # -- the step guard ------------------------------------------------------------------------------
     if code == OK and guarded:
-        jmin, smin, emin = frame_orientation(q, edofs, act, lam, gphi, gdphi, inv_det0, inv_len0)
-        if jmin <= 0.0:
-            code = INVERTED
-            io[IO_X] = jmin
-            io[IO_AUX] = emin
-        elif smin < par[P_SVK]:
-            code = SVK_LIMIT
-            io[IO_X] = smin
-        else:
-            extra_p = 0.0
-            extra_size = 0.0
-            check_balance = balance and led[2] == t_n
-            if damped:          # viscous work by the trapezoidal rule (StepGuard.dynamic)
-                wv = (diss - diss_p) / (2.0 * c_v)
-                extra_p += wv
-                extra_size += abs(wv)
-            g, x, y, e_end = dynamic_guard(q, dq, free, dof_scale, ivec, gvec, int(led[0]), react, int(led[1]),
-                                           m_indptr, m_indices, m_data, f_ext, r, rf, a, v, drive_ids, c_m, c_v,
-                                           tol, par[P_CMASS], par[P_RISE], par[P_BAL], u_p, strain, 1.0, extra_p,
-                                           extra_size, 0.0, kin, led[3], check_balance)
-            led[4] = e_end
-            io[IO_X] = x
-            io[IO_Y] = y
-            io[IO_EEND] = e_end
-            io[IO_AUX] = g
-            io[IO_UP] = u_p
-            if g != 0:
-                code = ENERGY
+        for k in range(nfg):
+            b = f0 + k * NF
+            jmin, smin, emin = frame_orientation(q, _v2(ci, lay[b + F_EDOFS]), _v1(ci, lay[b + F_ACT]), lam,
+                                                 _v2(wf, lay[b + F_GPHI]), _v2(wf, lay[b + F_GDPHI]),
+                                                 _v2(wf, lay[b + F_GIDET]), _v2(wf, lay[b + F_GILEN]))
+            if jmin <= 0.0:
+                code = INVERTED
+                io[IO_X] = jmin
+                io[IO_AUX] = emin
+                io[IO_GROUP] = k
+                break
+            if smin < par[P_SVK]:
+                code = SVK_LIMIT
+                io[IO_X] = smin
+                break
+    if code == OK and guarded:
+        extra_p = 0.0
+        extra_size = 0.0
+        w_mom = 0.0
+        if _v2(ci, lay[L_FVDOFS]).shape[0] or _v2(ci, lay[L_MVDOFS]).shape[0]:
+            q_l = _v1(wf, lay[L_QL])           # the last evaluated iterate
+            for i in range(n):
+                q_l[i] = q[i]
+            for k in range(nf):
+                q_l[free[k]] += dq[k]
+            w = _moment_work(q_l, q_p, no_dlam, cf, ci, wf, lay)
+            extra_p = -w
+            extra_size = abs(w)
+            w_mom = _moment_work(q, q_n, no_dlam, cf, ci, wf, lay)
+        if damped:          # viscous work by the trapezoidal rule (StepGuard.dynamic)
+            wv = (diss - diss_p) / (2.0 * c_v)
+            extra_p += wv
+            extra_size += abs(wv)
+        if nmult:
+            wm = 0.0
+            for i in range(nmult):
+                wm += mult[i] * (rc[i] - c_p[i])
+            extra_p += wm
+            extra_size += abs(wm)
+        check_balance = balance and led[2] == t_n
+        g, x, y, e_end = dynamic_guard(q, dq, free, _v1(cf, lay[L_DSCALE]), ivec, gvec, int(led[0]), react,
+                                       int(led[1]), m_indptr, m_indices, m_data, f_ext, r, rf, a, v,
+                                       _v1(wi, lay[L_DRIVE]), c_m, c_v, tol, par[P_CMASS], par[P_RISE], par[P_BAL],
+                                       u_p, strain, 1.0, extra_p, extra_size, w_mom, kin, led[3], check_balance)
+        led[4] = e_end
+        io[IO_X] = x
+        io[IO_Y] = y
+        io[IO_EEND] = e_end
+        io[IO_AUX] = g
+        io[IO_UP] = u_p
+        if g != 0:
+            code = ENERGY
     io[IO_IT] = it
     io[IO_REL] = rel
     io[IO_INC] = inc
@@ -332,6 +430,8 @@ def frame_step(q, v, a, atil, lam, lam_rate, f_ext, r, env, inv_diag, lu_stats, 
             v[i] = v_n[i]
             a[i] = a_n[i]
             atil[i] = at_n[i]
+        for i in range(nmult):
+            mult[i] = mult_n[i]
         return code
     tan[2] += 1.0
     if guarded:                    # the guard's ledger moves to the accepted state (ledger_accept)
@@ -378,8 +478,8 @@ class _Packer:
         return buf
 
 
-# Model fields frame_step accounts for (used, or checked empty above). A field added to Model
-# later keeps a model on the Python path whenever it is not empty, until it is looked at here.
+# Model fields model_step accounts for. A field added to Model later keeps a model on the Python
+# path whenever it is not empty, until it is looked at here.
 _KNOWN_MODEL_FIELDS = frozenset((
     "scene", "ndof", "q0", "dof_scale", "free", "free_index", "indptr", "indices", "mass_kdata", "mass_csr",
     "frame_groups", "truss", "moments", "load_vectors", "load_signals", "gravity_vector", "gravity_signal",
@@ -393,28 +493,17 @@ def _empty(value) -> bool:
     return value is None or (hasattr(value, "__len__") and len(value) == 0)
 
 
-class FastFrameStep:
-    """The numba step of :func:`frame_step`, bound to one integrator's model, workspace, solver
+class NumbaStep:
+    """The numba step of :func:`model_step`, bound to one integrator's model, workspace, solver
     and guard (everything it touches is allocated here or there, once)."""
 
     @staticmethod
     def unsupported(model: Model, spec: SolverSpec) -> str:
-        """'' when :func:`frame_step` covers every step of this model, else what it lacks."""
+        """'' when :func:`model_step` covers every step of this model, else what it lacks."""
         if spec.analysis != "dynamic" or spec.integrator not in ("newmark", "generalized_alpha"):
             return f"integrator {spec.integrator}"
         if spec.on_unconverged == "accept_flagged":
             return "on_unconverged: accept_flagged (keeps the failed iterate, which the kernel does not)"
-        if len(model.frame_groups) > 1:
-            return f"{len(model.frame_groups)} frame groups"
-        if getattr(model, "shell_groups", ()):
-            return "shell elements"
-        if model.drives is not None:
-            return "driven supports"
-        if model.n_multipliers:
-            return "Lagrange multipliers"
-        mo = model.moments
-        if mo.follower_vdofs.shape[0] or mo.cons_vdofs.shape[0]:
-            return "moment loads"
         unknown = [f.name for f in dataclasses.fields(model)
                    if f.name not in _KNOWN_MODEL_FIELDS and not _empty(getattr(model, f.name))]
         if unknown:
@@ -425,18 +514,13 @@ class FastFrameStep:
         m, ws = integ.model, integ.ws
         self.integ = integ
         self.model = m
-        if m.frame_groups:
-            g, st, gst = m.frame_groups[0], ws.frame_structure[0], integ.guard._stations[0]
-            scratch = ws.frame_scratch[0]
-        else:       # bars only: an empty frame group keeps the kernel's one signature
-            g = _empty_frame_group()
-            st, gst = frame_structure(g), StepGuard._frame_stations(m, g)
-            scratch = frame_scratch(g.w.shape[1], g.dax.shape[2])
         tg = m.truss if m.truss is not None else _empty_truss_group()
+        mo = m.moments
         sky = integ.lu.skyline
         guard = integ.guard
         n = m.ndof
-        lay = np.zeros((N_ITEMS, 6), dtype=np.int64)
+        nfg, nsg = len(m.frame_groups), len(m.shell_groups)
+        lay = np.zeros((N_ITEMS + nfg * NF + nsg * NS, 6), dtype=np.int64)
         par = np.zeros(N_PAR)
         spec = integ.spec
         par[P_AM], par[P_AF], par[P_BETA], par[P_GAMMA] = integ.am, integ.af, integ.beta, integ.gamma
@@ -445,41 +529,75 @@ class FastFrameStep:
         par[P_CONTRACTION], par[P_MAXAGE] = spec.modified_contraction, spec.tangent_max_age
         par[P_SVK], par[P_RISE], par[P_BAL] = SVK_LIMIT_STRETCH, guard.rise_tolerance, guard.balance_tolerance
         par[P_CMASS], par[P_PIVTOL], par[P_MINPIV] = guard._c_mass, sky.pivot_tol, integ.lu.min_pivot_ratio
-        par[P_NSEC], par[P_ACCUM] = g.nsec, sky._accumulate
-        par[P_DAMPED] = bool(m.material_damping)
+        par[P_ACCUM], par[P_DAMPED] = sky._accumulate, bool(m.material_damping)
+        par[P_NFG], par[P_NSG], par[P_F0], par[P_S0] = nfg, nsg, N_ITEMS, N_ITEMS + nfg * NF
+        par[P_NMULT] = m.n_multipliers
         mi, mj, mv = integ._mass
-        cf = _Packer(lay, np.float64)
-        for item, arr in ((L_DSCALE, m.dof_scale), (L_Q0, m.q0), (L_GRAV, m.gravity_vector), (L_DAX, g.dax),
-                          (L_DSEC, g.dsec), (L_W, g.w), (L_MAT, g.mat), (L_PAR, par), (L_MV, mv), (L_TL0, tg.l0),
-                          (L_TEA, tg.ea), (L_TTAU, tg.tau)):
+        cf, ci = _Packer(lay, np.float64), _Packer(lay, np.int64)
+        wf, wi = _Packer(lay, np.float64), _Packer(lay, np.int64)
+        for item, arr in ((L_DSCALE, m.dof_scale), (L_Q0, m.q0), (L_GRAV, m.gravity_vector), (L_PAR, par),
+                          (L_MV, mv), (L_TL0, tg.l0), (L_TEA, tg.ea), (L_TTAU, tg.tau), (L_CALPHA, m.corner_alpha),
+                          (L_HALPHA, m.hinge_alpha), (L_HBETA, m.hinge_beta), (L_TIEALPHA, m.tie_alpha),
+                          (L_FMBODY, mo.follower_mbody), (L_CAXES, mo.cons_axes), (L_CMAG, mo.cons_magnitude)):
             cf.add(item, arr)
-        ci = _Packer(lay, np.int64)
-        for item, arr in ((L_FREE, m.free), (L_EDOFS, g.edofs), (L_ACT, g.act), (L_SMAP, g.smap), (L_MI, mi),
-                          (L_MJ, mj), (L_TEDOFS, tg.edofs), (L_TACT, tg.act), (L_TSMAP, tg.smap)):
+        drive_ids = guard._drive_ids
+        for item, arr in ((L_FREE, m.free), (L_MI, mi), (L_MJ, mj), (L_TEDOFS, tg.edofs), (L_TACT, tg.act),
+                          (L_TSMAP, tg.smap), (L_CDOFS, m.corner_dofs), (L_CSMAP, m.corner_smap),
+                          (L_HDOFS, m.hinge_dofs), (L_HSMAP, m.hinge_smap), (L_TIEDOFS, m.tie_dofs),
+                          (L_TIESMAP, m.tie_smap), (L_FVDOFS, mo.follower_vdofs), (L_FSMAP, mo.follower_smap),
+                          (L_MVDOFS, mo.cons_vdofs), (L_MSMAP, mo.cons_smap), (L_DRVIDX, drive_ids)):
             ci.add(item, arr)
-        wf = _Packer(lay, np.float64)
-        for item, arr in ((L_INVS, integ._inv_scale), (L_MASSK, m.mass_kdata), (L_PHIST, st[1]),
-                          (L_DPHIST, st[2]), (L_SPT, st[3]), (L_HACC, st[5]), (L_GACC, st[6]), (L_TK, st[7]),
-                          (L_TG, st[8])):
+        nm = m.n_multipliers
+        for item, arr in ((L_INVS, integ._inv_scale), (L_MASSK, m.mass_kdata), (L_VEVAL, np.zeros(n)),
+                          (L_WBUF, np.zeros(n)), (L_RF, np.zeros(m.nsys)), (L_DQ, np.zeros(m.nsys)),
+                          (L_KDATA, np.zeros(m.nnz)), (L_IVEC, np.zeros((7, n))), (L_LUWORK, np.zeros(sky.n)),
+                          (L_TQE, np.zeros(6)), (L_TVE, np.zeros(6)), (L_TRE, np.zeros(6)), (L_TKE, np.zeros((6, 6))),
+                          (L_CKE, np.zeros((18, 18))), (L_HKE, np.zeros((14, 14))), (L_TIEKE, np.zeros((12, 12))),
+                          (L_RC, np.zeros(nm)), (L_CP, np.zeros(nm)), (L_MULTN, np.zeros(nm)),
+                          (L_FSCALE, np.ones(mo.follower_vdofs.shape[0])), (L_MSCALE, np.ones(mo.cons_vdofs.shape[0])),
+                          (L_RM, np.zeros(n)), (L_QL, np.zeros(n)), (L_KDUMMY, np.zeros(0)),
+                          (L_DRVVAL, np.zeros(drive_ids.size))):
             wf.add(item, arr)
-        for item, arr in zip(range(L_D, L_KN + 1), scratch):
-            wf.add(item, np.zeros_like(arr))                  # own scratch, same shapes
-        for item, arr in zip((L_GPHI, L_GDPHI, L_GIDET, L_GILEN), gst):
+        for item, arr in zip(range(L_SDV, L_SKE + 1), shell_scratch()):
             wf.add(item, arr)
-        for item, arr in ((L_VEVAL, np.zeros(n)), (L_WBUF, np.zeros(n)), (L_RF, np.zeros(m.nsys)),
-                          (L_DQ, np.zeros(m.nsys)), (L_KDATA, np.zeros(m.nnz)), (L_IVEC, np.zeros((7, n))),
-                          (L_LUWORK, np.zeros(sky.n)), (L_TQE, np.zeros(6)), (L_TVE, np.zeros(6)),
-                          (L_TRE, np.zeros(6)), (L_TKE, np.zeros((6, 6)))):
-            wf.add(item, arr)
-        wi = _Packer(lay, np.int64)
-        for item, arr in ((L_SLOT, sky._slot), (L_ZSLOT, sky._zero_slots),
-                          (L_BASE, sky._base), (L_LRP, sky._lrun[0]), (L_LRL, sky._lrun[1]), (L_LRH, sky._lrun[2]),
-                          (L_URP, sky._urun[0]), (L_URL, sky._urun[1]), (L_URH, sky._urun[2]),
-                          (L_BLK, sky._blk_ptr), (L_PERM, sky.perm), (L_STRAIGHT, st[0]), (L_BLOCKS, st[4]),
-                          (L_DRIVE, guard._drive_ids)):
+        for item, arr in ((L_SLOT, sky._slot), (L_ZSLOT, sky._zero_slots), (L_BASE, sky._base),
+                          (L_LRP, sky._lrun[0]), (L_LRL, sky._lrun[1]), (L_LRH, sky._lrun[2]), (L_URP, sky._urun[0]),
+                          (L_URL, sky._urun[1]), (L_URH, sky._urun[2]), (L_BLK, sky._blk_ptr), (L_PERM, sky.perm),
+                          (L_DRIVE, drive_ids)):
             wi.add(item, arr)
+        for k, (g, st, gst) in enumerate(zip(m.frame_groups, ws.frame_structure, guard._stations)):
+            b = N_ITEMS + k * NF
+            for item, arr in ((F_DAX, g.dax), (F_DSEC, g.dsec), (F_W, g.w), (F_MAT, g.mat)):
+                cf.add(b + item, arr)
+            for item, arr in ((F_EDOFS, g.edofs), (F_ACT, g.act), (F_SMAP, g.smap), (F_NSEC, [g.nsec])):
+                ci.add(b + item, arr)
+            for item, arr in ((F_PHIST, st[1]), (F_DPHIST, st[2]), (F_SPT, st[3]), (F_HACC, st[5]),
+                              (F_GACC, st[6]), (F_TK, st[7]), (F_TG, st[8])):
+                wf.add(b + item, arr)
+            for item, arr in zip(range(F_D, F_KN + 1), frame_scratch(g.w.shape[1], g.dax.shape[2])):
+                wf.add(b + item, arr)
+            for item, arr in zip((F_GPHI, F_GDPHI, F_GIDET, F_GILEN), gst):
+                wf.add(b + item, arr)
+            wi.add(b + F_STRAIGHT, st[0])
+            wi.add(b + F_BLOCKS, st[4])
+        for k, g in enumerate(m.shell_groups):
+            b = N_ITEMS + nfg * NF + k * NS
+            for item, arr in ((S_PHI, g.phi), (S_DPHI, g.dphi), (S_ZETA, g.zeta), (S_A0INV, g.a0inv), (S_W, g.w),
+                              (S_MAT, g.mat)):
+                cf.add(b + item, arr)
+            ci.add(b + S_EDOFS, g.edofs)
+            ci.add(b + S_SMAP, g.smap)
         self._lay = lay
         self._packs = (cf.build(False), ci.build(False), wf.build(True), wi.build(True))
+        wbuf = self._packs[2]
+
+        def view(item):
+            o, size = lay[item, 0], lay[item, 5]
+            return wbuf[o:o + size]
+
+        self._follower_scale, self._cons_scale = view(L_FSCALE), view(L_MSCALE)
+        self._drive_values, self._drive_ids = view(L_DRVVAL), drive_ids
+        self._q_drive = np.zeros(n) if m.drives is not None else None
         self._io = np.zeros(N_IO)
         na = m.actuators.l0.size
         self._lam_n = np.zeros(na)          # λ_n and its rate at the step's start (restored on failure)
@@ -490,9 +608,10 @@ class FastFrameStep:
         self._scales = np.full(len(m.load_signals), math.nan)
         self._g_scale = math.nan
         self._gravity = bool(np.any(m.gravity_vector != 0.0))
-        # from this time on every load signal is constant (a finished ramp, a constant), so f_ext,
-        # once formed there, stays: no signal is evaluated any more
-        sigs = list(m.load_signals) + ([m.gravity_signal] if self._gravity else [])
+        # from this time on every load signal is constant (a finished ramp, a constant), so f_ext
+        # and the moment scales, once formed there, stay: no signal is evaluated any more
+        sigs = (list(m.load_signals) + list(mo.follower_signals) + list(mo.cons_signals)
+                + ([m.gravity_signal] if self._gravity else []))
         self._still_after = max([_constant_after(x) for x in sigs], default=-math.inf)
         self._still = False
 
@@ -503,11 +622,17 @@ class FastFrameStep:
         self._still = False
 
     def loads(self, t: float) -> None:
-        """``f_ext`` at ``t`` as :func:`~flexmb_core.model.assembly.update_load_scales` forms it
-        (the same operations: bit-identical), recomputed only when a signal changed."""
+        """``f_ext`` and the moment scales at ``t`` as
+        :func:`~flexmb_core.model.assembly.update_load_scales` forms them (the same operations:
+        bit-identical), ``f_ext`` recomputed only when a signal changed."""
         if self._still:
             return
         m, ws = self.model, self.integ.ws
+        mo = m.moments
+        for i, s in enumerate(mo.follower_signals):
+            self._follower_scale[i] = evaluate(s, t)
+        for i, s in enumerate(mo.cons_signals):
+            self._cons_scale[i] = evaluate(s, t)
         changed = False
         sc = ws.load_scale
         for i, s in enumerate(self._signals):
@@ -528,6 +653,15 @@ class FastFrameStep:
             if gs != 0.0:
                 ws.f_ext += gs * m.gravity_vector
         self._still = t >= self._still_after
+
+    def drives(self, q: np.ndarray, t: float) -> None:
+        """The driven supports' DOFs at ``t`` into their ``wf`` item (by :func:`apply_drives`
+        itself on a copy of ``q``: the same operations as the Python path's)."""
+        if self._q_drive is None:
+            return
+        self._q_drive[:] = q
+        apply_drives(self.model, self._q_drive, t)
+        np.take(self._q_drive, self._drive_ids, out=self._drive_values)
 
     def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None
                 ) -> StepResult | None:
@@ -550,11 +684,12 @@ class FastFrameStep:
         balance = not integ.set_stretches(state, dt, lam_new, lam_rate)
         rates = state.lam_rate if integ._damped else self._zero_rate
         self.loads(t_n + dt)
+        self.drives(state.q, t_n + dt)
         f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = frame_step(state.q, state.v, state.a, state.atil, lam, rates, f_ext, r, env, inv_diag, stats,
-                          guard._gvec, guard._react, cf, ci, wf, wi, self._lay, tan, guard._led, self._io, t_n, dt,
-                          guard.enabled, balance)
+        code = model_step(state.q, state.v, state.a, state.atil, lam, rates, state.mult, f_ext, r, env, inv_diag,
+                          stats, guard._gvec, guard._react, cf, ci, wf, wi, self._lay, tan, guard._led, self._io, t_n,
+                          dt, guard.enabled, balance)
         if tan[0] != 0.0:
             lu._active = lu.skyline
             lu.skyline._factored = True
@@ -587,7 +722,8 @@ class FastFrameStep:
             message = f"non-finite increment at Newton iteration {it}"
         elif code == INVERTED:
             flag = "inverted"
-            member = m.members[int(m.frame_groups[0].member[int(io[IO_AUX])])].name
+            group = m.frame_groups[int(io[IO_GROUP])]
+            member = m.members[int(group.member[int(io[IO_AUX])])].name
             message = (f"step guard: inverted frame section (det F = {io[IO_X]:.3g} ≤ 0 in member "
                        f"'{member}'), a reflection Green–Lagrange strain cannot see")
         elif code == SVK_LIMIT:
@@ -603,18 +739,10 @@ class FastFrameStep:
         return StepResult(False, it, rel, inc, 1, message=message)
 
 
-def _empty_frame_group() -> FrameGroup:
-    """A frame group of no elements (linear, one point), for models of bars only."""
-    i0 = np.zeros(0, dtype=np.int64)
-    return FrameGroup(order=1, nsec=1, edofs=np.zeros((0, 18), dtype=np.int64), dax=np.zeros((0, 1, 6, 3)),
-                      dsec=np.zeros((0, 1, 6, 3)), w=np.zeros((0, 1)), mat=np.zeros((0, 7)), act=i0,
-                      smap=np.zeros((0, 324), dtype=np.int64), member=i0)
-
-
 def _empty_truss_group() -> TrussGroup:
     i0 = np.zeros(0, dtype=np.int64)
     return TrussGroup(edofs=np.zeros((0, 6), dtype=np.int64), l0=np.zeros(0), ea=np.zeros(0), act=i0,
                       smap=np.zeros((0, 36), dtype=np.int64), member=i0, tau=np.zeros(0))
 
 
-from ..solvers.guard import SVK_LIMIT_STRETCH, StepGuard  # noqa: E402  (after the kernel: no import cycle at compile)
+from ..solvers.guard import SVK_LIMIT_STRETCH  # noqa: E402  (after the kernel: no import cycle at compile)

@@ -12,22 +12,22 @@ def test_a_changed_source_drops_the_cached_kernels_and_an_unchanged_one_keeps_th
     caches = numba_cache._cache_dirs(dirs, str(tmp_path))
     kernels = caches[0]
     kernels.mkdir(parents=True)
-    (kernels / "fast.frame_step-63.py311.nbi").write_text("index")
-    (kernels / "fast.frame_step-63.py311.1.nbc").write_text("code")
+    (kernels / "fast.model_step-63.py311.nbi").write_text("index")
+    (kernels / "fast.model_step-63.py311.1.nbc").write_text("code")
     other = tmp_path / "someone_else_0123"
     other.mkdir()
     (other / "x.f-1.py311.nbi").write_text("index")
 
     assert numba_cache.ensure_fresh()                 # no stamp yet: the sources are new to this cache
     assert not list(kernels.iterdir()) and (other / "x.f-1.py311.nbi").exists()
-    (kernels / "fast.frame_step-63.py311.nbi").write_text("index")
+    (kernels / "fast.model_step-63.py311.nbi").write_text("index")
     assert not numba_cache.ensure_fresh()             # same sources: kept
-    assert (kernels / "fast.frame_step-63.py311.nbi").exists()
+    assert (kernels / "fast.model_step-63.py311.nbi").exists()
 
     stamp = next(tmp_path.glob("flexmb_sources_*"))
     stamp.write_text("digest of other sources")       # as after an edit of any kernel file
     assert numba_cache.ensure_fresh()
-    assert not (kernels / "fast.frame_step-63.py311.nbi").exists()
+    assert not (kernels / "fast.model_step-63.py311.nbi").exists()
     assert stamp.read_text() == numba_cache._digest(dirs)
 
 
