@@ -219,7 +219,7 @@ def _component_costs(model) -> dict:
     @njit
     def rep_factor(k, kd, mk, coef, slot, acc, zs, base, a, b, c, d, e, f, blk, env, idg, ptol, stats):
         for _ in range(k):
-            _factor_kernel(kd, mk, coef, slot, acc, zs, base, a, b, c, d, e, f, blk, env, idg, ptol, stats)
+            _factor_kernel(kd, mk, coef, slot, acc, zs, base, a, b, c, d, e, f, blk, env, idg, ptol, stats, 0)
 
     @njit
     def rep_en(k, mi, mj, mv, v, q, q0, gr):

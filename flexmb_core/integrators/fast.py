@@ -333,7 +333,7 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
             step = _factor_kernel(kdata, _v1(wf, lay[L_MASSK]), coef, _v1(wi, lay[L_SLOT]), accumulate,
                                   _v1(wi, lay[L_ZSLOT]), _v1(wi, lay[L_BASE]), _v1(wi, lay[L_LRP]),
                                   _v1(wi, lay[L_LRL]), _v1(wi, lay[L_LRH]), _v1(wi, lay[L_URP]), _v1(wi, lay[L_URL]),
-                                  _v1(wi, lay[L_URH]), _v1(wi, lay[L_BLK]), env, inv_diag, pivot_tol, lu_stats)
+                                  _v1(wi, lay[L_URH]), _v1(wi, lay[L_BLK]), env, inv_diag, pivot_tol, lu_stats, nmult)
             if step >= 0 or not lu_stats[0] > 0.0 or lu_stats[1] < min_pivot_ratio * lu_stats[0]:
                 tan[0] = 0.0
                 code = PIVOT

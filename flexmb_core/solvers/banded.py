@@ -42,9 +42,12 @@ touched again (structural zeros are skipped), so it costs no time.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
+from numba.extending import register_jitable
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import FlexmbError
@@ -238,6 +241,19 @@ def _candidate_orderings(sym: sp.csr_matrix, which: str):
             yield f"arrowhead(degree>{d})", _arrowhead_ordering(sym, is_sep)
 
 
+def _late_last(sym: sp.csr_matrix, perm: np.ndarray, n0: int) -> np.ndarray:
+    """``perm`` with the unknowns ``n0 …`` (multipliers) moved to the end, each after the last of
+    its neighbours: a multiplier's pivot is then the Schur complement ``−G A⁻¹ Gᵀ`` of the
+    unknowns it constrains, never its own zero diagonal."""
+    head = perm[perm < n0]
+    late = np.arange(n0, sym.shape[0], dtype=np.int64)
+    pos = np.empty(sym.shape[0], np.int64)
+    pos[head] = np.arange(head.size)
+    pos[late] = -1
+    last_nb = np.array([pos[sym.indices[sym.indptr[i]:sym.indptr[i + 1]]].max() for i in late], dtype=np.int64)
+    return np.concatenate((head, late[np.lexsort((late, last_nb))])).astype(np.int64)
+
+
 # ---------------------------------------------------------------------------------------------
 # Symbolic factorization (run once per candidate ordering)
 # ---------------------------------------------------------------------------------------------
@@ -394,7 +410,7 @@ def _blocks(uptr, uidx, max_block):
 
 @njit(cache=True, fastmath=_FASTMATH)
 def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_ptr, lrun_lo, lrun_hi,
-                   urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, stats):
+                   urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, stats, nlate):
     """Scatter ``A = data + coef * data2`` into the envelope and factor ``P A Pᵀ = L U`` in place,
     without pivoting.
 
@@ -430,6 +446,13 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_p
         Relative pivot threshold.
     stats : float64 (3,)
         Output: ``max |diag(A)|``, ``min |pivot|`` of the steps done, the failing pivot.
+    nlate : int
+        The last ``nlate`` rows of the permuted matrix are Lagrange multipliers (zero diagonal
+        block), eliminated after every unknown they constrain. Their rows and columns are scaled
+        by ``s = 2^round(log2 max|diag(A)|)`` before the elimination and the factors scaled back
+        after it (powers of two: exact), so that their pivots, the Schur complements
+        ``−s² G A⁻¹ Gᵀ``, are of the size of the other pivots instead of ``1/stiffness`` — the
+        pivot threshold and ``min |pivot|`` then judge them like any other pivot.
 
     Returns
     -------
@@ -460,6 +483,10 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_p
             dmax = a
     thresh = pivot_tol * dmax
     stats[0] = dmax
+    scale = 1.0
+    if nlate > 0 and dmax > 0.0:
+        scale = math.ldexp(1.0, int(round(math.log2(dmax))))
+        _scale_late(n - nlate, scale, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env)
     pmin = np.inf
     for b in range(blk_ptr.shape[0] - 1):
         k0 = blk_ptr[b]
@@ -608,9 +635,49 @@ def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_p
                                     j = np.uint64(jj)
                                     env[oi + j] -= l0 * env[o0 + j]
                             p += 1
+    if scale != 1.0:
+        _unscale_late(n - nlate, scale, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env, inv_diag)
     stats[1] = pmin
     stats[2] = 0.0
     return -1
+
+
+@register_jitable             # inlined into _factor_kernel (no dispatcher of its own to cache)
+def _scale_late(n0, s, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env):
+    """``D A D`` in place, ``D = diag(1, …, 1, s, …, s)`` (``s`` from row ``n0`` on), over the
+    structural entries (see :func:`_factor_kernel`, ``nlate``)."""
+    n = base.shape[0]
+    for i in range(n):
+        di = s if i >= n0 else 1.0
+        bi = base[i]
+        if i >= n0:
+            for t in range(lrun_ptr[i], lrun_ptr[i + 1]):
+                for j in range(lrun_lo[t], lrun_hi[t]):
+                    env[bi + j] *= s * s if j >= n0 else s
+            env[bi + i] *= s * s
+        for t in range(urun_ptr[i], urun_ptr[i + 1]):
+            for j in range(max(urun_lo[t], n0), urun_hi[t]):
+                env[bi + j] *= di * s
+
+
+@register_jitable
+def _unscale_late(n0, s, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env, inv_diag):
+    """Factors of ``A`` from those of ``D A D = L U``: ``A = (D⁻¹ L D)(D⁻¹ U D⁻¹)``, i.e.
+    ``L_ij·d_j/d_i`` (unit diagonal kept) and ``U_ij/(d_i d_j)`` (see :func:`_factor_kernel`)."""
+    n = base.shape[0]
+    r = 1.0 / s
+    for i in range(n):
+        bi = base[i]
+        if i >= n0:
+            for t in range(lrun_ptr[i], lrun_ptr[i + 1]):
+                for j in range(lrun_lo[t], min(lrun_hi[t], n0)):
+                    env[bi + j] *= r
+            env[bi + i] *= r * r
+            inv_diag[i] *= s * s
+        di = s if i >= n0 else 1.0
+        for t in range(urun_ptr[i], urun_ptr[i + 1]):
+            for j in range(max(urun_lo[t], n0), urun_hi[t]):
+                env[bi + j] *= 1.0 / (di * s)
 
 
 @njit(cache=True, fastmath=_FASTMATH)
@@ -695,6 +762,10 @@ class SkylineLU:
         A pivot ``d`` fails when ``|d| <= pivot_tol * max |diag(A)|`` or ``d`` is not finite.
     ordering : {"auto", "rcm", "natural"}, keyword-only
         ``"auto"`` keeps the cheapest of the given numbering, RCM and the arrowhead orderings.
+    late : int, keyword-only
+        The last ``late`` unknowns are Lagrange multipliers (a zero diagonal block): every ordering
+        keeps them last, each after the unknowns it constrains, and the factorization scales them
+        so that their pivots are judged like the others (see :func:`_factor_kernel`).
 
     Attributes
     ----------
@@ -714,7 +785,8 @@ class SkylineLU:
     Not thread-safe: :meth:`solve` uses an internal scratch vector.
     """
 
-    def __init__(self, n: int, indptr, indices, *, pivot_tol: float = 1e-14, ordering: str = "auto"):
+    def __init__(self, n: int, indptr, indices, *, pivot_tol: float = 1e-14, ordering: str = "auto",
+                 late: int = 0):
         n = int(n)
         if n < 1:
             raise ValueError(f"SkylineLU: n must be >= 1, got {n}")
@@ -732,9 +804,12 @@ class SkylineLU:
             raise ValueError(f"SkylineLU: ordering must be 'auto', 'rcm' or 'natural', got {ordering!r}")
         if not pivot_tol >= 0.0:
             raise ValueError(f"SkylineLU: pivot_tol must be >= 0, got {pivot_tol}")
+        if not 0 <= late <= n:
+            raise ValueError(f"SkylineLU: late must lie in [0, {n}], got {late}")
         self.n = n
         self.nnz = int(indices.shape[0])
         self.pivot_tol = float(pivot_tol)
+        self.late = int(late)
 
         a = sp.csr_matrix((np.ones(self.nnz), indices, indptr), shape=(n, n))
         sym = (abs(a) + abs(a.T) + sp.identity(n, format="csr")).tocsr()
@@ -746,6 +821,8 @@ class SkylineLU:
         best = None
         self.candidates = {}
         for name, perm in _candidate_orderings(sym, ordering):
+            if late:
+                perm = _late_last(sym, perm, n - late)
             ps = sym[perm][:, perm].tocsr()
             ps.sort_indices()
             structure = _symbolic(ps.indptr.astype(np.int64), ps.indices.astype(np.int64))
@@ -861,7 +938,7 @@ class SkylineLU:
         self._factored = False
         step = _factor_kernel(data, mass, float(coef), self._slot, self._accumulate, self._zero_slots,
                               self._base, *self._lrun, *self._urun, self._blk_ptr,
-                              self._env, self._inv_diag, self.pivot_tol, self._stats)
+                              self._env, self._inv_diag, self.pivot_tol, self._stats, self.late)
         if step >= 0:
             raise SingularPivotError(self.perm[step], step, self._stats[2],
                                      self.pivot_tol * self._stats[0])

@@ -43,7 +43,8 @@ class FixedPatternSolver:
     """
 
     def __init__(self, model: Model, *, min_pivot_ratio: float = 1e-10):
-        self.skyline = SkylineLU(model.nsys, model.indptr, model.indices)
+        # multipliers (the last rows of the system) are eliminated last, scaled (see SkylineLU)
+        self.skyline = SkylineLU(model.nsys, model.indptr, model.indices, late=model.n_multipliers)
         self.superlu = SparseLU(model)
         self.min_pivot_ratio = min_pivot_ratio
         self.fallbacks = 0

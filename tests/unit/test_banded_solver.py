@@ -328,6 +328,48 @@ def test_one_unknown():
 
 
 # ---------------------------------------------------------------------------------------------
+# Lagrange multipliers (a zero diagonal block, eliminated last and scaled)
+# ---------------------------------------------------------------------------------------------
+
+def _kkt(p: Problem, m: int = 6, stiffness: float = 2e9, seed: int = 3) -> sp.csr_matrix:
+    """``[K Gᵀ; G 0]``: K the SPD problem scaled to steel-like stiffness, G ``m`` dense-ish rows of
+    O(1) coefficients, each on the DOFs of one element (as rigid corners and ties are)."""
+    rng = np.random.default_rng(seed)
+    k = stiffness * p.values("spd")
+    g = np.zeros((m, p.n))
+    for i in range(m):
+        d = p.edofs[(7 * i) % len(p.edofs)][:12]
+        g[i, d] = rng.standard_normal(d.size)
+    a = sp.bmat([[k, sp.csr_matrix(g).T], [sp.csr_matrix(g), None]]).tocsr()
+    a.sort_indices()
+    return a
+
+
+def test_multipliers_last_and_scaled_solve_a_saddle_point_system():
+    """Without ``late`` a multiplier's zero diagonal is a pivot (or its Schur complement is
+    ~1/stiffness: refused as near-singular); with it the factorization keeps them last, its
+    pivots are judged like K's, and the solution is the direct solver's."""
+    a = _kkt(Problem("stewart"))
+    n = a.shape[0]
+    b = np.random.default_rng(4).standard_normal(n)
+    ref = spsolve(a.tocsc(), b)
+    lu = SkylineLU(n, a.indptr, a.indices, late=6)
+    assert set(lu.perm[-6:]) == set(range(n - 6, n))
+    lu.factor(a.data)
+    x = lu.solve(b)
+    assert _rel_err(x, ref) < 1e-9
+    assert _backward_err(a, x, b) < 1e-14
+    assert lu.min_pivot_ratio > 1e-8, lu.min_pivot_ratio
+    assert lu.negative_pivots == 6             # inertia of [K Gᵀ; G 0], K SPD: m negative
+    plain = SkylineLU(n, a.indptr, a.indices)
+    try:
+        plain.factor(a.data)
+    except SingularPivotError:
+        return
+    assert plain.min_pivot_ratio < 1e-10
+
+
+# ---------------------------------------------------------------------------------------------
 # compilation
 # ---------------------------------------------------------------------------------------------
 
@@ -341,6 +383,8 @@ def test_each_kernel_compiles_one_signature():
     lu.solve(np.ones(2 * p.n)[::2])
     lu.solve(np.ones(p.n, dtype=np.float32), out=np.empty(p.n))
     SkylineLU(p.n, p.indptr, p.indices, ordering="natural").factor(a.data)
+    kkt = _kkt(Problem("stewart"))
+    SkylineLU(kkt.shape[0], kkt.indptr, kkt.indices, late=6).factor(kkt.data)
     kernels = {name: obj for name, obj in vars(banded).items()
                if isinstance(obj, numba.core.registry.CPUDispatcher)}
     assert len(kernels) == 6, sorted(kernels)
