@@ -6,6 +6,7 @@ Importing this module imports neither rerun nor rclpy: they load inside the verb
 from __future__ import annotations
 
 import argparse
+import math
 import shutil
 import sys
 from pathlib import Path
@@ -41,6 +42,10 @@ def cmd_view(args: argparse.Namespace) -> int:
     _require_rerun("flexmb view")
     if not args.period >= 0:
         raise FlexmbError(f"--period must be ≥ 0 s, got {args.period}")
+    if not (args.exaggerate > 0 and math.isfinite(args.exaggerate)):
+        raise FlexmbError(f"--exaggerate must be a finite factor > 0, got {args.exaggerate}")
+    if args.exaggerate != 1.0 and Path(args.recording).suffix == ".rrd":
+        raise FlexmbError("--exaggerate applies to a bag or .mcap (an .rrd is shown as it was logged)")
     src = Path(args.recording)
     layout = None
     temporary = False
@@ -57,13 +62,14 @@ def cmd_view(args: argparse.Namespace) -> int:
             rrd, temporary = _temp_rrd(src), True
         else:
             rrd = Path(src.resolve().stem + ".rrd")
-        report = view_recording(src, rrd_path=str(rrd), period=args.period)
+        report = view_recording(src, rrd_path=str(rrd), period=args.period, exaggerate=args.exaggerate)
         layout = report.layout
         n = sum(report.messages.values())
         span = f"t = {report.t_first:.6g} … {report.t_last:.6g} s" if n else "no messages"
         print(f"{src}: logged {n} messages on {len(report.messages)} topics ({span})"
               + (f", scene '{report.scene}'" if report.scene else ", no scene attached (geometry from markers)")
-              + (" — the file ends early (read up to its last complete record)" if report.truncated else ""))
+              + (" — the file ends early (read up to its last complete record)" if report.truncated else "")
+              + (f"; members' bending drawn ×{args.exaggerate:g}" if args.exaggerate != 1.0 else ""))
         if args.rrd or not (args.spawn or args.png):
             print(f"wrote {rrd}")
     opened = False
@@ -113,6 +119,9 @@ def register(verbs, run_parser: argparse.ArgumentParser) -> None:
     v.add_argument("--period", type=float, default=0.0, metavar="S",
                    help="keep at most one message per topic every S seconds of stamp time (default: all)")
     v.add_argument("--window-size", default="1600x900", metavar="WxH", help="PNG size in points (default 1600x900)")
+    v.add_argument("--exaggerate", type=float, default=1.0, metavar="K",
+                   help="draw each member's bending (its deviation from its chord) K times as large; ends, "
+                        "rigid motion and stretch as computed (default 1)")
     v.set_defaults(func=cmd_view)
     run_parser.add_argument("--rrd", metavar="OUT", help="log the run into a rerun recording (.rrd)")
     run_parser.add_argument("--rrd-period", type=float, default=DEFAULT_PERIOD, metavar="S",

@@ -123,6 +123,44 @@ def markers_to_shells(msg) -> tuple[list[str], list[np.ndarray], list[tuple]]:
     return names, points, colors
 
 
+class Exaggeration:
+    """Magnifies the bending of members: each polyline's deviation from its chord, beyond the
+    deviation it had in the first shape seen, is multiplied by ``factor``.
+
+    A point of a member at chord fraction ``s`` (from the first shape: its projection on the chord
+    there) is drawn at ``c(s) + d₀ + factor·(d − d₀)``, ``c(s) = p_first + s (p_last − p_first)``
+    the chord now, ``d`` its deviation from it now and ``d₀`` at first sight. The member's ends, its
+    rigid motion and its stretch stay as computed, so the legs still meet their joints; the
+    transverse deflection of a straight member (``d₀ = 0``) is what grows. ``d₀`` is kept in world
+    axes: a curved member that turns far from its first pose is drawn with its initial curvature
+    misplaced (the Stewart legs and the shipped frames are straight)."""
+
+    def __init__(self, factor: float):
+        self.factor = float(factor)
+        self._first: dict[str, tuple[np.ndarray, np.ndarray]] = {}      # name → (s (m,), d₀ (m, 3))
+
+    @staticmethod
+    def _chord(pts: np.ndarray, s: np.ndarray) -> np.ndarray:
+        return pts[0] + s[:, None] * (pts[-1] - pts[0])
+
+    def apply(self, name: str, pts: np.ndarray) -> np.ndarray:
+        """The magnified polyline ``(m, 3)`` of member ``name`` (``pts`` as computed)."""
+        if self.factor == 1.0 or pts.shape[0] < 3:
+            return pts
+        first = self._first.get(name)
+        if first is None or first[0].size != pts.shape[0]:
+            axis = pts[-1] - pts[0]
+            length2 = float(axis @ axis)
+            if not length2 > 0.0:
+                return pts                       # a closed loop: no chord to measure from
+            s = (pts - pts[0]) @ axis / length2
+            first = (s, pts - self._chord(pts, s))
+            self._first[name] = first
+        s, d0 = first
+        chord = self._chord(pts, s)
+        return chord + d0 + self.factor * (pts - chord - d0)
+
+
 class _Router:
     """Decides which logger call a recorded topic feeds (by type, and by name for poses)."""
 
@@ -136,6 +174,7 @@ class _Router:
                     self.prefix = topic[: -len(suffix)]
         self.has_actuator_state = T_ACTUATOR_STATE in channels.values()
         self.has_pose = any(typ == T_POSE and top.endswith("platform_pose") for top, typ in channels.items())
+        self.exaggeration = Exaggeration(1.0)
 
     def platform_name(self, topic: str) -> str:
         """``<prefix>/platform_pose`` is the first platform; ``<prefix>/<output>/platform_pose`` names it."""
@@ -151,7 +190,7 @@ class _Router:
 
 
 def view_recording(path, *, rrd_path: str | None = None, period: float = 0.0, recording_id=None,
-                   logger=None) -> ViewReport:
+                   logger=None, exaggerate: float = 1.0) -> ViewReport:
     """Log a recording into rerun.
 
     Parameters
@@ -167,6 +206,8 @@ def view_recording(path, *, rrd_path: str | None = None, period: float = 0.0, re
         Passed to the logger (default: the recording's file name, so re-viewing replaces it).
     logger
         An open :class:`~flexmb_io.viz.rerun_log.TwinRerunLogger` to log into (not closed here).
+    exaggerate
+        Factor on the members' bending (:class:`Exaggeration`; 1: as computed).
     """
     from .rerun_log import TwinRerunLogger
 
@@ -186,6 +227,7 @@ def view_recording(path, *, rrd_path: str | None = None, period: float = 0.0, re
         logger.layout = layout
     logger.log_static()
     router = _Router(channels, layout)
+    router.exaggeration = Exaggeration(exaggerate)
     next_kept: dict[str, float] = {}        # per topic, the next grid time to keep (with period)
     sim_t = 0.0                             # newest simulated time seen: stamps unstamped inputs
     try:
@@ -239,6 +281,7 @@ def _dispatch(logger, router: _Router, m, t: float) -> bool:
     msg, typ = m.msg, m.type
     if typ == T_SHAPE:
         names, pts, widths, colors = markers_to_members(msg)
+        pts = [router.exaggeration.apply(n, p) for n, p in zip(names, pts)]
         # colours from the markers only when no scene says the member kinds
         logger.log_members(t, names, pts, widths, None if logger.layout.from_scene else colors)
         names, pts, colors = markers_to_shells(msg)

@@ -419,3 +419,34 @@ def test_png_snapshot_shows_the_legs(recording, tmp_path):
     left = img[:, : int(0.6 * img.shape[1])]
     orange = np.all(np.abs(left - np.array(ORANGE)) < 40, axis=2)
     assert orange.mean() > 0.005, f"only {orange.mean():.4f} of the 3D view is leg-coloured"
+
+
+def test_exaggeration_magnifies_bending_and_keeps_ends_rigid_motion_and_stretch():
+    """A straight member, then moved rigidly, stretched 1 % and bent by a small arc: drawn ×K,
+    its ends stay, its chord points stay on the chord, and the deviation from the chord is K
+    times the computed one; a member whose shape does not change is drawn as computed."""
+    from scipy.spatial.transform import Rotation
+
+    from flexmb_io.viz.view import Exaggeration
+
+    s = np.linspace(0.0, 1.0, 7)
+    straight = np.outer(s, [0.5, 0.0, 0.0])
+    ex = Exaggeration(40.0)
+    assert np.array_equal(ex.apply("leg", straight), straight)
+    rot = Rotation.from_rotvec([0.3, -0.2, 0.7])
+    bend = 1e-4 * np.sin(np.pi * s)
+    moved = rot.apply(np.column_stack((0.505 * s, bend, 0.0 * s))) + [1.0, 2.0, 3.0]
+    drawn = ex.apply("leg", moved)
+    assert np.allclose(drawn[[0, -1]], moved[[0, -1]], rtol=0, atol=1e-15)
+    chord = moved[0] + s[:, None] * (moved[-1] - moved[0])
+    assert np.allclose(drawn - chord, 40.0 * (moved - chord), rtol=0, atol=1e-14)
+    assert np.linalg.norm(drawn - chord, axis=1).max() == pytest.approx(40.0 * 1e-4, rel=1e-12)
+    assert np.allclose(Exaggeration(1.0).apply("leg", moved), moved)
+
+
+@needs_rerun
+def test_view_rejects_a_bad_exaggeration(recording, tmp_path):
+    res = flexmb("view", recording, "--exaggerate", "-2", "--rrd", tmp_path / "x.rrd")
+    assert res.returncode != 0
+    assert "--exaggerate must be a finite factor > 0, got -2.0" in res.stderr + res.stdout
+    assert "Traceback" not in res.stderr
