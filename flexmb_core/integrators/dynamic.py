@@ -192,7 +192,7 @@ class DynamicIntegrator:
             res = self._newton(state, dt, lam_new, lam_rate)
             if self.fast is not None:
                 self.fast.invalidate()
-        elif not res.converged:
+        elif not res.converged and self.spec.on_unconverged != "accept_flagged":
             self._backup.assign(state)      # the numba attempt leaves the step's start in place
         if res.converged or self.spec.on_unconverged != "substep":
             if not res.converged and self.spec.on_unconverged == "stop":
@@ -234,7 +234,12 @@ class DynamicIntegrator:
         """Sub-step ``k`` of a split step (each split starts again from the step's start)."""
         if k == 1:
             self.guard.ledger_restore()
-        return self._newton(state, dt, lam_new)
+        res = self.fast.attempt(state, dt, lam_new) if self.fast is not None else None
+        if res is None:
+            res = self._newton(state, dt, lam_new)
+            if self.fast is not None:
+                self.fast.invalidate()
+        return res
 
     def _newton(self, state: State, dt: float, lam_new: np.ndarray,
                 lam_rate: np.ndarray | None = None) -> StepResult:

@@ -10,11 +10,11 @@ very kernels the Python path calls, in the same order, so the states it produces
 to it (``tests/unit/test_fast_step.py``); it only removes the Python between them.
 
 Not covered (:meth:`NumbaStep.unsupported` names it and the integrator keeps its Python path):
-the Chung–Hulbert integrator (kept to show it is not objective) and ``on_unconverged:
-accept_flagged``. A step the kernel cannot finish — no convergence, a refused root, a pivot the
-skyline LU must not take (the Python path then pivots with SuperLU) — leaves the state as it was
-and hands back to the integrator, whose ``on_unconverged`` policy proceeds as for any failed
-attempt; sub-steps run in the Python path.
+the Chung–Hulbert integrator (kept to show it is not objective). A step the kernel cannot finish —
+no convergence, a refused root — leaves the state as it was (under ``accept_flagged``: at the last
+iterate, as the Python path leaves it) and hands back to the integrator, whose ``on_unconverged``
+policy proceeds as for any failed attempt; its sub-steps are numba steps too. A pivot the skyline
+LU must not take hands the attempt to the Python path, which pivots with SuperLU.
 
 Arguments. A step needs about 150 arrays, and every array argument of a numba call costs
 dispatch time (≈ 0.1 µs), so they travel in four flat packs — read-only floats ``cf`` and ints
@@ -73,7 +73,7 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, 
 S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, NS = range(9)
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
- P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, N_PAR) = range(24)
+ P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, N_PAR) = range(25)
 # Output slots of io.
 (IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, IO_GROUP,
  N_IO) = range(14)
@@ -425,13 +425,14 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     if code != OK:
         if code != PIVOT:
             tan[0] = 0.0           # a failed step never leaves a stale tangent behind
-        for i in range(n):         # the step's start, for the integrator's policy
-            q[i] = q_n[i]
-            v[i] = v_n[i]
-            a[i] = a_n[i]
-            atil[i] = at_n[i]
-        for i in range(nmult):
-            mult[i] = mult_n[i]
+        if code == PIVOT or par[P_KEEP] == 0.0:
+            for i in range(n):     # the step's start, for the integrator's policy (or the Python path)
+                q[i] = q_n[i]
+                v[i] = v_n[i]
+                a[i] = a_n[i]
+                atil[i] = at_n[i]
+            for i in range(nmult):
+                mult[i] = mult_n[i]
         return code
     tan[2] += 1.0
     if guarded:                    # the guard's ledger moves to the accepted state (ledger_accept)
@@ -502,8 +503,6 @@ class NumbaStep:
         """'' when :func:`model_step` covers every step of this model, else what it lacks."""
         if spec.analysis != "dynamic" or spec.integrator not in ("newmark", "generalized_alpha"):
             return f"integrator {spec.integrator}"
-        if spec.on_unconverged == "accept_flagged":
-            return "on_unconverged: accept_flagged (keeps the failed iterate, which the kernel does not)"
         unknown = [f.name for f in dataclasses.fields(model)
                    if f.name not in _KNOWN_MODEL_FIELDS and not _empty(getattr(model, f.name))]
         if unknown:
@@ -532,6 +531,9 @@ class NumbaStep:
         par[P_ACCUM], par[P_DAMPED] = sky._accumulate, bool(m.material_damping)
         par[P_NFG], par[P_NSG], par[P_F0], par[P_S0] = nfg, nsg, N_ITEMS, N_ITEMS + nfg * NF
         par[P_NMULT] = m.n_multipliers
+        # accept_flagged keeps a failed attempt's last iterate, as the Python path leaves it
+        self._keep_failed = spec.on_unconverged == "accept_flagged"
+        par[P_KEEP] = self._keep_failed
         mi, mj, mv = integ._mass
         cf, ci = _Packer(lay, np.float64), _Packer(lay, np.int64)
         wf, wi = _Packer(lay, np.float64), _Packer(lay, np.int64)
@@ -699,7 +701,9 @@ class NumbaStep:
             state.t = t_n + dt
             integ.accept_stretches(t_n, t_n + dt)
             return StepResult(True, int(it), rel, inc, 1, kin, strain, grav)
-        if lam.size:                    # the step's start, for the integrator's policy
+        if self._keep_failed and code != PIVOT:
+            state.t = t_n + dt          # the failed iterate at t_{n+1}, λ_{n+1} in force (accept_flagged)
+        elif lam.size:                  # the step's start, for the integrator's policy
             lam[:] = self._lam_n
             state.lam_rate[:] = self._rate_n
         return self._failure(code, int(it), rel, inc, strain, kin, grav)

@@ -83,16 +83,23 @@ def test_bit_identical_through_refused_roots_and_sub_steps():
     assert any(r[4] > 1 for r in a[0]) and a[0][125][9] == "inverted"
 
 
-@pytest.mark.parametrize("change, reason", [
-    (lambda d: d["solver"].update(integrator="chung_hulbert"), "integrator"),
-    (lambda d: d["solver"].update(on_unconverged="accept_flagged"), "accept_flagged"),
-])
-def test_models_it_does_not_cover_keep_the_python_path(change, reason):
+def test_chung_hulbert_keeps_the_python_path():
     d = _b1()
-    change(d)
+    d["solver"].update(integrator="chung_hulbert")
     model, sim = build(d)
-    assert reason in NumbaStep.unsupported(model, sim.spec)
+    assert "integrator chung_hulbert" in NumbaStep.unsupported(model, sim.spec)
     assert sim._dynamic.fast is None
+
+
+def test_bit_identical_when_failed_steps_are_accepted_and_flagged():
+    """accept_flagged keeps a failed attempt's last iterate: the numba step leaves it as the
+    Python path does (the tumbling beam's failures and refused roots, kept and flagged)."""
+    d = _tumbling()
+    d["solver"]["on_unconverged"] = "accept_flagged"
+    a, b = _history(d, True, 130, _spin_tumble), _history(d, False, 130, _spin_tumble)
+    assert a[0] == b[0]
+    assert np.array_equal(a[1], b[1])
+    assert sum(not r[0] for r in a[0]) > 0
 
 
 def _moments(follower):
