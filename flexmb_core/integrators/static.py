@@ -38,6 +38,7 @@ from ..solvers.substep import retry_in_pieces
 from .critical import TangentLU
 from .energy import energies
 from .path_following import dof_index, position_mask
+from .static_step import NumbaStatic
 
 # A converged load step longer than this many times its tangent prediction is a jump between
 # branches (see the module docstring).
@@ -112,6 +113,9 @@ class StaticSolver:
         # snap-through watch: on for static runs (one more tangent and factorization per step)
         watch = spec.analysis == "static" if monitor is None else monitor
         self.snap = SnapThroughMonitor(model, spec) if watch else None
+        # One numba call per load increment (bit-identical states; None: the Python loop, which
+        # also makes the increments whose tangent needs SuperLU's pivoting)
+        self.fast = None if NumbaStatic.unsupported(model) else NumbaStatic(self)
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         """Equilibrium at pseudo-time ``t`` starting from ``state.q``. On failure, the policy
@@ -134,6 +138,10 @@ class StaticSolver:
         return res
 
     def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
+        if self.fast is not None:
+            res = self.fast.solve(state, t, lam)
+            if res is not None:
+                return res
         # A diverging iterate overflows (norms of huge residuals, inf − inf): every value that
         # matters is checked for finiteness and a failure is reported in the StepResult, so numpy
         # need not print warnings on the way.
