@@ -1,0 +1,191 @@
+"""The numba step against the Python Newton loop it replaces, on every shipped scene (issue 13).
+
+For each dynamic scene: steps/s of the numba step (``integrators/fast.py``) and of the Python path
+(``DynamicIntegrator._newton``, forced by setting the integrator's ``fast`` to None) on the same
+model, interleaved round by round (medians of the per-round ratios: the machine is shared and its
+speed drifts); for each static scene run by load stepping, the wall time of the whole run with
+``static_step`` and with the Python loop. The two paths give bit-identical states
+(``tests/unit/test_fast_step.py``, ``tests/unit/test_static_step.py``); SuperLU factorizations
+(tangents the skyline LU did not take) are counted.
+
+    .venv/bin/python benchmarks/numba_step.py [--rounds 5] [--steps 400] [--out docs/benchmarks]
+
+``--against TREE`` (a checkout of an older revision, e.g. ``git worktree add /tmp/old 35a2f54``)
+instead times the scenes given by ``--scenes`` in that tree and in this one, each in its own
+process and numba cache, interleaved round by round, and prints µs per step:
+
+    .venv/bin/python benchmarks/numba_step.py --against /tmp/old --scenes stewart_platform_shell radiator_panels
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from flexmb_core.model.compile import compile_scene  # noqa: E402
+from flexmb_core.scene import load_scene  # noqa: E402
+from flexmb_core.simulator import Simulator  # noqa: E402
+
+DYNAMIC = ["cantilever_b1", "actuator_arm", "deployable_boom", "rps_manipulator", "stewart_platform_bars",
+           "stewart_platform_1el", "stewart_platform", "boom_step", "spin_up", "stewart_platform_shell",
+           "right_angle_cantilever", "tendon_arm", "radiator_panels"]
+STATIC = ["shell_roll_up", "shell_strip_shear", "shell_pulled_cylinder", "shell_pinched_hemisphere",
+          "shell_pinched_cylinder"]          # shell_slit_annulus: ≈ 1 min a run
+
+
+def _dynamic_rate(model, numba: bool, steps: int) -> tuple[float, int]:
+    sim = Simulator(model)
+    sim.warmup()
+    sim.initialize()
+    if not numba:
+        sim._dynamic.fast = None
+    for _ in range(10):
+        sim.step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        sim.step()
+    return steps / (time.perf_counter() - t0), sim._dynamic.lu.fallbacks
+
+
+def _static_wall(model, numba: bool) -> tuple[float, int]:
+    sim = Simulator(model)
+    sim.warmup()
+    if not numba:
+        sim._static.fast = None
+    t0 = time.perf_counter()
+    sim.initialize()
+    while sim.state.t < sim.spec.until - 1e-12:
+        sim.step()
+    return time.perf_counter() - t0, sim._static.lu.fallbacks
+
+
+# µs per step of the default path of whatever tree is first on sys.path (run by --against)
+_PROBE = """
+import sys, time, statistics
+sys.path.insert(0, sys.argv[1])
+from flexmb_core.model.compile import compile_scene
+from flexmb_core.scene import load_scene
+from flexmb_core.simulator import Simulator
+sim = Simulator(compile_scene(load_scene(sys.argv[2])))
+sim.warmup()
+sim.initialize()
+for _ in range(20):
+    sim.step()
+n, blocks = int(sys.argv[3]), []
+for _ in range(5):
+    t0 = time.perf_counter()
+    for _ in range(n):
+        sim.step()
+    blocks.append((time.perf_counter() - t0) / n * 1e6)
+print(statistics.median(blocks))
+"""
+
+
+def _against(tree: Path, scenes: list[str], rounds: int, steps: int) -> int:
+    import subprocess
+
+    for name in scenes:
+        times: dict[str, list[float]] = {"before": [], "after": []}
+        for _ in range(rounds):
+            for label, src in (("before", tree), ("after", ROOT)):
+                env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(src) / ".cache" / "numba_against"))
+                out = subprocess.run([sys.executable, "-c", _PROBE, str(src), str(ROOT / "scenes" / f"{name}.yaml"),
+                                      str(steps)], capture_output=True, text=True, env=env, cwd=src, check=True)
+                times[label].append(float(out.stdout.strip().splitlines()[-1]))
+        ratios = [b / a for b, a in zip(times["before"], times["after"])]
+        print(f"{name:26s} before {' / '.join(f'{x:.0f}' for x in times['before'])} µs/step, after "
+              f"{' / '.join(f'{x:.0f}' for x in times['after'])} µs/step: {statistics.median(ratios):.2f}× "
+              "(median of the rounds' ratios)", flush=True)
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=400, help="timed steps per dynamic run")
+    ap.add_argument("--static-rounds", type=int, default=3)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks"))
+    ap.add_argument("--against", metavar="TREE", help="time --scenes in this older checkout and here instead")
+    ap.add_argument("--scenes", nargs="+", default=["stewart_platform_shell", "radiator_panels"])
+    args = ap.parse_args()
+    if args.against:
+        return _against(Path(args.against), args.scenes, args.rounds, args.steps)
+    rows = []
+    for name in DYNAMIC:
+        model = compile_scene(load_scene(ROOT / "scenes" / f"{name}.yaml"))
+        rates = {True: [], False: []}
+        ratios, fallbacks = [], 0
+        for _ in range(args.rounds):
+            a, fallbacks = _dynamic_rate(model, True, args.steps)
+            b, _ = _dynamic_rate(model, False, args.steps)
+            rates[True].append(a)
+            rates[False].append(b)
+            ratios.append(a / b)
+        row = {"scene": name, "kind": "dynamic", "numba_steps_per_s": statistics.median(rates[True]),
+               "python_steps_per_s": statistics.median(rates[False]), "speedup": statistics.median(ratios),
+               "superlu_factorizations": fallbacks, "dofs": model.ndof, "multipliers": model.n_multipliers}
+        rows.append(row)
+        print(f"{name:26s} numba {row['numba_steps_per_s']:8.0f} steps/s  python {row['python_steps_per_s']:8.0f}"
+              f"  × {row['speedup']:.2f}  SuperLU {fallbacks}", flush=True)
+    for name in STATIC:
+        model = compile_scene(load_scene(ROOT / "scenes" / f"{name}.yaml"))
+        walls = {True: [], False: []}
+        ratios = []
+        for _ in range(args.static_rounds):
+            a, fallbacks = _static_wall(model, True)
+            b, _ = _static_wall(model, False)
+            walls[True].append(a)
+            walls[False].append(b)
+            ratios.append(b / a)
+        row = {"scene": name, "kind": "static", "numba_wall_s": statistics.median(walls[True]),
+               "python_wall_s": statistics.median(walls[False]), "speedup": statistics.median(ratios),
+               "superlu_factorizations": fallbacks, "dofs": model.ndof, "multipliers": model.n_multipliers}
+        rows.append(row)
+        print(f"{name:26s} numba {row['numba_wall_s']:7.2f} s  python {row['python_wall_s']:7.2f} s"
+              f"  × {row['speedup']:.2f}  SuperLU {fallbacks}", flush=True)
+    out = Path(args.out)
+    meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(), "cpus": os.cpu_count(),
+            "rounds": args.rounds, "steps": args.steps, "static_rounds": args.static_rounds}
+    (out / "numba_step.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+    (out / "numba_step.md").write_text(_render(meta, rows))
+    print(f"wrote {out / 'numba_step.md'}")
+    return 0
+
+
+def _render(meta: dict, rows: list[dict]) -> str:
+    lines = ["# The numba step against the Python Newton loop (issue 13)", "",
+             f"Generated by `benchmarks/numba_step.py` on {meta['date']} ({meta['platform']}, {meta['cpus']} cores, "
+             f"one used). The two paths are interleaved round by round ({meta['rounds']} rounds of "
+             f"{meta['steps']} steps per dynamic scene, {meta['static_rounds']} whole runs per static scene); "
+             "medians, and the median of the per-round ratios. The states are bit-identical "
+             "(`tests/unit/test_fast_step.py`, `tests/unit/test_static_step.py`). 'SuperLU' counts the tangent "
+             "factorizations the skyline LU handed to SuperLU in one numba run (each such attempt is made by the "
+             "Python loop).", "",
+             "## Dynamics: steps/s", "",
+             "| scene | DOFs | multipliers | numba step | Python loop | speed-up | SuperLU |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r["kind"] == "dynamic":
+            lines.append(f"| {r['scene']} | {r['dofs']} | {r['multipliers']} | {r['numba_steps_per_s']:.0f} | "
+                         f"{r['python_steps_per_s']:.0f} | {r['speedup']:.2f}× | {r['superlu_factorizations']} |")
+    lines += ["", "## Statics by load stepping: wall time of the run", "",
+              "| scene | DOFs | numba Newton | Python loop | speed-up | SuperLU |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        if r["kind"] == "static":
+            lines.append(f"| {r['scene']} | {r['dofs']} | {r['numba_wall_s']:.2f} s | {r['python_wall_s']:.2f} s | "
+                         f"{r['speedup']:.2f}× | {r['superlu_factorizations']} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
