@@ -62,6 +62,13 @@ _SWITCH_INTERVAL = 5.0e-5
 _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
 _LISTENER_PERIOD = 0.5
+# most messages one turn of the spin loop takes straight from a command subscription's history
+# (beyond its depth only what arrived meanwhile; a bound, so that a flood cannot hold the loop)
+TAKE_MAX = 64
+# after a spin applied a command, take the command histories empty and spin once more (see the
+# executor's comment in TwinNode.__init__); False only for benchmarks/node_overload_rss.py's
+# comparison with the node before (the executor's queue then grows while the node is overloaded)
+DRAIN_HISTORIES = True
 # MB the resident set may grow after stepping began before the node says so (measured on an idle
 # machine: flat over 8.7 min once the rings were resident, docs/benchmarks/node_rss_soak.md)
 RSS_GROWTH_WARN_MB = 64.0
@@ -136,6 +143,7 @@ class TwinNode:
         self.rerun = None
         self._pub: dict = {}
         self._subs: list = []
+        self._command_subs: list = []             # (topic, kind, subscription) of the command inputs
         self._diag = None
         self._threads_started = False
         self._publisher = None
@@ -147,15 +155,25 @@ class TwinNode:
         # -- executor: rclpy's C++ events executor, which only moves command messages in. Measured
         #    against SingleThreadedExecutor (node + 1 kHz player, 80 s each, idle machine): missed
         #    deadlines 100 vs 5153, player latency p50 1.1 vs 10.2 ms, CPU beyond the solver 63 vs
-        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its known defect (rclpy 9.1.2): once the machine
-        #    has overloaded the node, it keeps ≈ 140 bytes per received message (allocated in its
-        #    on-new-message callback, heaptrack), even with CPU to spare again; README "Memory"
+        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its events queue (rclpy 9.1.2) holds one entry
+        #    (≈ 140 bytes) per message Fast DDS announces; an entry takes one message and is dropped
+        #    without a user callback only when the history is empty by then. While the executor is
+        #    slower than the commands arrive (an overloaded machine) every entry still finds a
+        #    message, so the entries of the messages the keep-last history overwrote pile up, one
+        #    per command not taken (measured: +1.44 MB in 15 s, a callback of 3 ms at 1 kHz). Hence
+        #    _take_commands: after a spin applied a command, the node takes what else waits in the
+        #    histories itself and, when it took any, spins once more without waiting, which drops
+        #    the stale entries before those commands are applied (+0.02 MB in the same 15 s, as
+        #    many commands applied; benchmarks/node_overload_rss.py, README "Memory")
         from rclpy.experimental import EventsExecutor
         self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
 
         # -- counters (publisher thread) ------------------------------------------------------------
         self._callbacks = 0
+        self._inbox: list = []                  # executor: (topic, kind, message, reception) not yet applied
+        self._took = False                      # executor: a spin applied a command
+        self._draining = False                  # executor: _take_commands is spinning
         self.commands_lost: dict[str, int] = {}      # resolved command topic → messages lost before delivery
         self._out_event = threading.Event()
         self._last_command_wall = None          # executor: newest message received
@@ -261,11 +279,12 @@ class TwinNode:
             self._diag = Diagnostics(self.node, out_qos, self.fq_name.lstrip("/"))
         if self.runner.schedule is not None:
             for topic, kind in _INPUTS:
-                cb = (lambda msg, _t=topic, _k=kind: self._on_command(_t, _k, msg))
+                cb = (lambda msg, _t=topic, _k=kind: self._on_message(_t, _k, msg))
                 lost = SubscriptionEventCallbacks(message_lost=lambda ev, _t=topic: self._on_lost(_t, ev))
                 sub = self.node.create_subscription(message_class(topic.type), topic.name, cb, in_qos,
                                                     qos_overriding_options=overriding, event_callbacks=lost)
                 self._subs.append(sub)
+                self._command_subs.append((topic, kind, sub))
                 self._names[topic.name] = sub.topic_name
 
         # -- recording and viewing ------------------------------------------------------------------
@@ -384,6 +403,8 @@ class TwinNode:
         if self._diag is not None:
             self.node.destroy_publisher(self._diag._pub)
         self._pub, self._subs, self._diag = {}, [], None
+        self._command_subs = []
+        self._inbox.clear()
         self._listened = {}
         self.stepper = None
         self.runner = None
@@ -418,8 +439,52 @@ class TwinNode:
             self._warned[key] = now
             self.log.warning(text)
 
-    def _on_command(self, topic: T.Topic, kind: str, msg) -> None:
+    def _on_message(self, topic: T.Topic, kind: str, msg) -> None:
+        """A command subscription's callback: applied at once, or filed while _take_commands spins."""
         t_recv = time.perf_counter()
+        if self._draining:
+            self._inbox.append((topic, kind, msg, t_recv))
+            return
+        self._took = True
+        self._on_command(topic, kind, msg, t_recv)
+
+    def _take_commands(self) -> None:
+        """After a spin applied a command (executor thread): every command subscription's history
+        is taken empty here (at most ``TAKE_MAX`` messages each), one non-blocking spin runs the
+        executor's queue (its entries for the messages just taken, or overwritten, now find nothing
+        and are dropped; a command that arrived meanwhile is filed after them), and these commands
+        are applied in order of arrival per topic. Without this, an executor slower than its
+        commands keeps one queue entry per command it never took (the executor's comment in
+        ``__init__``). On a node that keeps up the histories are empty: one take per command topic
+        (a few µs each), no spin."""
+        self._took = False
+        inbox = self._inbox
+        for topic, kind, sub in self._command_subs:
+            handle, msg_type, raw = sub.handle, sub.msg_type, sub.raw
+            for _ in range(TAKE_MAX):
+                with handle:
+                    taken = handle.take_message(msg_type, raw)
+                if taken is None:
+                    break
+                inbox.append((topic, kind, taken[0], time.perf_counter()))
+        if not inbox:
+            return               # the histories were empty: the next spin drops any stale entry
+        self._draining = True
+        try:
+            self.executor.spin_once(timeout_sec=0.0)     # ≈ 0.1 ms, hence only when it drops some
+        finally:
+            self._draining = False
+        self._apply_inbox()
+
+    def _apply_inbox(self) -> None:
+        inbox = self._inbox
+        try:
+            for topic, kind, msg, t_recv in inbox:
+                self._on_command(topic, kind, msg, t_recv)
+        finally:
+            inbox.clear()
+
+    def _on_command(self, topic: T.Topic, kind: str, msg, t_recv: float) -> None:
         if not self.active:
             self._warn("inactive", f"{self._names[topic.name]}: ignored: the node is inactive (lifecycle); "
                        "activate it to command the twin")
@@ -611,8 +676,7 @@ class TwinNode:
         if rss - self._rss_start > RSS_GROWTH_WARN_MB:
             msg = (msg + "; " if msg else "") + (
                 f"memory: resident set {rss:.0f} MB, {rss - self._rss_start:.0f} MB more than when stepping "
-                "began (known after an overload: rclpy's events executor keeps memory per received command; "
-                "README 'Memory'; restarting the node gives it back)")
+                "began (not expected, README 'Memory'; restarting the node gives it back)")
         if msg:
             self._warn("behind", msg)
         self._behind_message = msg
@@ -706,6 +770,8 @@ class TwinNode:
         try:
             while not self._done():
                 self.executor.spin_once(timeout_sec=0.05)
+                if self._took and DRAIN_HISTORIES:
+                    self._take_commands()
         except (KeyboardInterrupt, ExternalShutdownException):
             self.stop_requested = True
         finally:
