@@ -10,7 +10,7 @@ busy-looping processes for ``--overload`` s (the node's executor thread then get
 - ``inline``: each command applied inside rclpy's events-executor callback and nothing else (the
   node before the fix; ``ros2_node.node.DRAIN_HISTORIES = False``);
 - ``drain``: the same, and after a spin that applied a command the node takes what else waits in
-  the command histories itself and, when it found any, spins once without waiting, then applies
+  the command histories itself and, when more than one waited, spins once without waiting, then applies
   those (the node now).
 
 Then ``--latency-runs`` calm runs of each (no hogs), interleaved, for the command→state latency
@@ -215,7 +215,7 @@ def _bare_node(variant: str, seconds: float, slow_ms: float) -> None:
                 if taken is None:
                     break
                 inbox.append(taken[0])
-            if inbox:
+            if len(inbox) > 1:                          # a backlog: drop the stale entries first
                 state["draining"] = True
                 ex.spin_once(timeout_sec=0.0)
                 state["draining"] = False
@@ -249,12 +249,15 @@ def _bare_pub(seconds: float, rate: float) -> None:
                                            reliability=ReliabilityPolicy.BEST_EFFORT))
     msg = Float64MultiArray(data=[0.1] * 6)
     t0, k = time.monotonic(), 0
-    while time.monotonic() - t0 < seconds:
-        k += 1
-        pub.publish(msg)
-        wait = t0 + k / rate - time.monotonic()
-        if wait > 0:
-            time.sleep(wait)
+    try:
+        while time.monotonic() - t0 < seconds:
+            k += 1
+            pub.publish(msg)
+            wait = t0 + k / rate - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+    except KeyboardInterrupt:            # the parent stops the publisher with SIGINT
+        pass
     rclpy.shutdown(context=ctx)
 
 
@@ -348,8 +351,9 @@ def main() -> int:
              f"processes beside it, {a.after:g} s calm again; the node's VmRSS every second. `inline`: each "
              "command applied inside the events executor's callback, nothing else (before the fix); `drain`: "
              "the same, and after a spin that applied a command the node takes what else waits in the command "
-             "histories itself and, when it found any, spins once without waiting (the queue's stale entries "
-             "then find nothing and are dropped) and applies what it took (now). Runs interleaved.", ""]
+             "histories itself and, when more than one waited (a backlog), spins once without waiting (the "
+             "queue's stale entries then find nothing and are dropped); then it applies what it took (now). "
+             "Runs interleaved.", ""]
     if bare_runs:
         third = a.bare / 3
         lines += [f"The mechanism alone (bare rclpy node, same executor and QoS, 1 kHz in; its callback sleeps "

@@ -450,13 +450,16 @@ class TwinNode:
 
     def _take_commands(self) -> None:
         """After a spin applied a command (executor thread): every command subscription's history
-        is taken empty here (at most ``TAKE_MAX`` messages each), one non-blocking spin runs the
-        executor's queue (its entries for the messages just taken, or overwritten, now find nothing
-        and are dropped; a command that arrived meanwhile is filed after them), and these commands
-        are applied in order of arrival per topic. Without this, an executor slower than its
-        commands keeps one queue entry per command it never took (the executor's comment in
-        ``__init__``). On a node that keeps up the histories are empty: one take per command topic
-        (a few µs each), no spin."""
+        is taken empty here (at most ``TAKE_MAX`` messages each) and the commands are applied in
+        order of arrival per topic. When more than one was waiting — a backlog, the sign of an
+        executor slower than its commands — one non-blocking spin first runs the executor's queue:
+        its entries for the messages just taken, or overwritten, now find nothing and are dropped (a
+        command that arrived meanwhile is filed after them). Without this an overloaded executor
+        keeps one queue entry per command it never took (the executor's comment in ``__init__``).
+        A single waiting command is applied at once, without the spin (≈ 0.1 ms): measured on a calm
+        machine, spinning for it too raised the node's p99 latency from 1.4 to 4.4 ms
+        (``benchmarks/node_overload_rss.py --rounds 0 --bare 0 --latency-runs 5``). On a node
+        that keeps up the histories are mostly empty: one take per command topic (a few µs each)."""
         self._took = False
         inbox = self._inbox
         for topic, kind, sub in self._command_subs:
@@ -469,11 +472,12 @@ class TwinNode:
                 inbox.append((topic, kind, taken[0], time.perf_counter()))
         if not inbox:
             return               # the histories were empty: the next spin drops any stale entry
-        self._draining = True
-        try:
-            self.executor.spin_once(timeout_sec=0.0)     # ≈ 0.1 ms, hence only when it drops some
-        finally:
-            self._draining = False
+        if len(inbox) > 1:       # a backlog: drop the executor's stale entries before applying
+            self._draining = True
+            try:
+                self.executor.spin_once(timeout_sec=0.0)
+            finally:
+                self._draining = False
         self._apply_inbox()
 
     def _apply_inbox(self) -> None:
