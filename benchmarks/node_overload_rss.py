@@ -40,6 +40,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from node_rss_soak import _rss_mb  # noqa: E402  (the VmRSS reader of the long soak)
 DOCS = ROOT / "docs" / "benchmarks"
 OUT = ROOT / "build" / "bench_overload"
 VARIANTS = ("inline", "drain")
@@ -49,16 +51,6 @@ _NODE = ("import sys; import ros2_node.node as N; N.DRAIN_HISTORIES = {drain}; "
 _HOG = "while True: pass"
 # s between the player's start and the first sample (discovery, the first commands)
 WARMUP = 5.0
-
-
-def _rss_mb(pid: int) -> float | None:
-    try:
-        for line in (Path("/proc") / str(pid) / "status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        return None
-    return None
 
 
 def _stop(proc: subprocess.Popen, timeout: float = 60.0) -> None:
