@@ -218,7 +218,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
         ke[:, :] = 0.0
     energy = 0.0
     ns = 0              # filled slots of the tangent batch
-    p0 = 0
+    p0 = npt * 0         # an int64 from data: a literal 0 would compile a second signature of _fields
     while p0 < npt:
         # The run p0 … p1−1 of points through the thickness at one in-plane point.
         p1 = p0 + 1
