@@ -156,17 +156,20 @@ def test_an_unpaced_burst_is_accounted_for_taken_or_counted_lost(tmp_path, dds_e
         client.spin_until(lambda: time.monotonic() > settled, 5, "discovery to settle", node)
         for k in range(MESSAGES):
             client.publish(T.COMMANDS, Float64MultiArray(data=[REST + 1e-7 * (k % 100)] * 6))
-        # the backlog is worked off when the statuses slow to publish_rate (100 Hz): while it lasts,
-        # every command taken is answered by one more
-        window = [time.monotonic(), len(client.statuses())]
+        # the backlog is worked off when the node's count of accepted commands (/diagnostics, once a
+        # second) stands still between two reports (the status rate alone is no sign: the node
+        # applies a backlog in turns, several commands to one answer)
+        last = [-1, 0]
 
         def drained() -> bool:
-            now, n = time.monotonic(), len(client.statuses())
-            if now - window[0] < 1.0:
+            reports = client.received[T.DIAGNOSTICS.name]
+            if len(reports) == last[1]:
                 return False
-            rate = (n - window[1]) / (now - window[0])
-            window[:] = [now, n]
-            return rate < 200.0
+            values = {kv.key: kv.value for st in reports[-1].status for kv in st.values}
+            accepted = int(values.get("accepted", -1))
+            done = accepted == last[0] and accepted > 0
+            last[:] = [accepted, len(reports)]
+            return done
         client.spin_until(drained, 120, "the twin to work off the burst", node)
         settled = time.monotonic() + 1.5       # a /diagnostics after it
         client.spin_until(lambda: time.monotonic() > settled, 5, "a last /diagnostics", node)
