@@ -169,6 +169,7 @@ def _bare_node(variant: str, seconds: float, slow_ms: float) -> None:
     from rclpy.experimental import EventsExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64MultiArray
+    from ros2_node.taking import take_waiting
 
     ctx = Context()
     rclpy.init(context=ctx)
@@ -201,12 +202,7 @@ def _bare_node(variant: str, seconds: float, slow_ms: float) -> None:
         count["spins"] += 1
         if state["took"] and variant == "drain":     # the node's _take_commands, on one subscription
             state["took"] = False
-            while True:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is None:
-                    break
-                inbox.append(taken[0])
+            inbox.extend(take_waiting(sub))
             if len(inbox) > 1:                          # a backlog: drop the stale entries first
                 state["draining"] = True
                 ex.spin_once(timeout_sec=0.0)

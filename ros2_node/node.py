@@ -55,6 +55,7 @@ from flexmb_io.wire import serialize
 
 from .convert import message_class, to_dict
 from .params import SPECS, NodeParams
+from .taking import TAKE_MAX, take_waiting
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
 _SWITCH_INTERVAL = 5.0e-5
@@ -62,9 +63,6 @@ _SWITCH_INTERVAL = 5.0e-5
 _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
 _LISTENER_PERIOD = 0.5
-# most messages one turn of the spin loop takes straight from a command subscription's history
-# (beyond its depth only what arrived meanwhile; a bound, so that a flood cannot hold the loop)
-TAKE_MAX = 64
 # after a spin applied a command, take the command histories empty and spin once more (see the
 # executor's comment in TwinNode.__init__); False only for benchmarks/node_overload_rss.py's
 # comparison with the node before (the executor's queue then grows while the node is overloaded)
@@ -155,16 +153,11 @@ class TwinNode:
         # -- executor: rclpy's C++ events executor, which only moves command messages in. Measured
         #    against SingleThreadedExecutor (node + 1 kHz player, 80 s each, idle machine): missed
         #    deadlines 100 vs 5153, player latency p50 1.1 vs 10.2 ms, CPU beyond the solver 63 vs
-        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its events queue (rclpy 9.1.2) holds one entry
-        #    (≈ 140 bytes) per message Fast DDS announces; an entry takes one message and is dropped
-        #    without a user callback only when the history is empty by then. While the executor is
-        #    slower than the commands arrive (an overloaded machine) every entry still finds a
-        #    message, so the entries of the messages the keep-last history overwrote pile up, one
-        #    per command not taken (measured: +1.44 MB in 15 s, a callback of 3 ms at 1 kHz). Hence
-        #    _take_commands: after a spin applied a command, the node takes what else waits in the
-        #    histories itself and, when it took any, spins once more without waiting, which drops
-        #    the stale entries before those commands are applied (+0.02 MB in the same 15 s, as
-        #    many commands applied; benchmarks/node_overload_rss.py, README "Memory")
+        #    90 % of a core, RSS +0.03 vs +0.96 MB. Its events queue keeps one entry per message
+        #    not taken while the executor is slower than the commands (ros2_node/taking.py): hence
+        #    _take_commands, which takes the command histories empty after a spin applied a command
+        #    (+0.02 against +1.44 MB in 15 s, a 3 ms callback at 1 kHz, as many commands applied;
+        #    benchmarks/node_overload_rss.py, README "Memory")
         from rclpy.experimental import EventsExecutor
         self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
@@ -463,13 +456,8 @@ class TwinNode:
         self._took = False
         inbox = self._inbox
         for topic, kind, sub in self._command_subs:
-            handle, msg_type, raw = sub.handle, sub.msg_type, sub.raw
-            for _ in range(TAKE_MAX):
-                with handle:
-                    taken = handle.take_message(msg_type, raw)
-                if taken is None:
-                    break
-                inbox.append((topic, kind, taken[0], time.perf_counter()))
+            for msg in take_waiting(sub, TAKE_MAX):
+                inbox.append((topic, kind, msg, time.perf_counter()))
         if not inbox:
             return               # the histories were empty: the next spin drops any stale entry
         if len(inbox) > 1:       # a backlog: drop the executor's stale entries before applying

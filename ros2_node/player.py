@@ -31,6 +31,7 @@ from flexmb_io.realtime import Series
 from flexmb_io.wire import serialize
 
 from .convert import message_class
+from .taking import take_waiting
 
 UNANSWERED_AFTER = 10.0     # s after which a command without an answer is counted unanswered and forgotten
 
@@ -160,7 +161,8 @@ class Player:
         if self.topic is None:
             raise FlexmbError(f"--topic: expected actuator_commands or commands, got {topic!r}")
         self.pub = self.node.create_publisher(message_class(self.topic.type), self.topic.resolved(twin), qos)
-        self.node.create_subscription(message_class(T.STATUS.type), T.STATUS.resolved(twin), self._on_status, qos)
+        self._status_sub = self.node.create_subscription(message_class(T.STATUS.type), T.STATUS.resolved(twin),
+                                                         self._on_status, qos)
         self.node.create_subscription(message_class(T.PLATFORM_POSE.type), T.PLATFORM_POSE.resolved(twin),
                                       self._on_pose, qos)
         self.node.create_subscription(message_class(T.CLOCK.type), T.CLOCK.resolved(twin), self._on_clock, qos)
@@ -187,7 +189,14 @@ class Player:
 
     # -- callbacks ------------------------------------------------------------------------------
     def _on_status(self, msg) -> None:
-        now = time.perf_counter()
+        """A status (one per command the twin answered): read it, then the others already waiting,
+        so that a player slower than the answers (an overloaded machine) leaves the executor's
+        queue no entries to keep (``ros2_node/taking.py``)."""
+        self._read_status(msg, time.perf_counter())
+        for waiting in take_waiting(self._status_sub):
+            self._read_status(waiting, time.perf_counter())
+
+    def _read_status(self, msg, now: float) -> None:
         self.statuses += 1
         self.last_status = msg
         if not msg.converged:
