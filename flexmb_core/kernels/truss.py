@@ -104,7 +104,7 @@ def truss_group(q, v, edofs, l0, ea, tau, act, lam_act, lam_rate, c_v, smap, wan
     return energy, diss
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def truss_group_actuator_dudlam(q, v, edofs, l0, ea, tau, act, lam_act, lam_rate, c_v, want_k, out, qe, ve,
                                 re, ke):
     """Accumulate dU/dλ (+ ∂D/∂λ̇) of every actuated bar into ``out[actuator]`` (J); ``want_k`` =

@@ -120,10 +120,10 @@ def actuator_dudlam(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray,
     ws.dudlam[:] = 0.0
     v = ws.zero_v if v is None else v
     lam_rate = ws.zero_lam_rate if lam_rate is None else lam_rate
-    for g, sc in zip(model.frame_groups, ws.frame_scratch):
+    for g, sc, st in zip(model.frame_groups, ws.frame_scratch, ws.frame_structure):
         if np.any(g.act >= 0):
             frame_group_actuator_dudlam(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, lam_rate, 0.0,
-                                        False, True, ws.dudlam, *sc)
+                                        False, True, ws.dudlam, *sc, *st)
     if model.truss is not None and np.any(model.truss.act >= 0):
         t = model.truss
         truss_group_actuator_dudlam(q, v, t.edofs, t.l0, t.ea, t.tau, t.act, lam, lam_rate, 0.0, False, ws.dudlam,

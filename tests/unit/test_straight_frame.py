@@ -193,8 +193,8 @@ def test_rigid_rates_are_not_damped(section):
 
 def test_group_paths_agree_for_damped_actuators():
     """frame_group through the straight and the general paths (flags on/off) on a damped actuated
-    member: residual, tangent, energy and dissipation agree to 1e-12; frame_group_actuator_dudlam
-    is unchanged."""
+    member: residual, tangent, energy and dissipation agree to 1e-12; so do the actuator forces of
+    frame_group_actuator_dudlam through either path."""
     model, g, _, sc = _element(3, SECTIONS[2], TAU)
     act = np.zeros_like(g.act)                           # all three elements driven by actuator 0
     act.setflags(write=False)                            # as the model's: one compiled signature
@@ -216,13 +216,14 @@ def test_group_paths_agree_for_damped_actuators():
     assert d1 == pytest.approx(d2, rel=1e-12)
     assert _rel(r1, r2) <= 1e-12
     assert _rel(k1, k2) <= 1e-12
-    dl = np.zeros(1)
-    frame_group_actuator_dudlam(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, act, lam, lam_rate, 0.0, False,
-                                True, dl, *sc)
     st = frame_structure(g)
     ref = sum(_straight(g, st, sc, e, q[g.edofs[e]].copy(), lam[0], False, v[g.edofs[e]].copy(), lam_rate[0],
                         want_dlam=True)[3] for e in range(g.edofs.shape[0]))
-    assert dl[0] == pytest.approx(ref, rel=1e-12)
+    for structured in (True, False):          # the actuator force through either path
+        dl = np.zeros(1)
+        frame_group_actuator_dudlam(q, v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, act, lam, lam_rate, 0.0,
+                                    False, True, dl, *sc, *frame_structure(g, structured=structured))
+        assert dl[0] == pytest.approx(ref, rel=1e-12)
 
 
 def test_every_straight_element_takes_it():
