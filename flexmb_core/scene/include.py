@@ -31,6 +31,8 @@ from ..errors import SceneError, excerpt
 from .limits import Limits
 from .overrides import OverrideError, set_path, split_key
 from .reader import Node
+from .schema import IncludeItem
+from .typed import read
 
 MAX_DEPTH = 16
 
@@ -60,7 +62,7 @@ def _read_one(item: Node, source: str, limits: Limits | None, stack: tuple[Path,
     from .loader import parse_yaml, read_scene_text
 
     if isinstance(item.value, dict):
-        item.mapping({"file", "overrides"}, {"file"})
+        read(item, IncludeItem)
         file = item.get("file")
     else:
         file = item

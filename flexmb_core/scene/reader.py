@@ -42,12 +42,12 @@ class Node:
         return self
 
     def get(self, key: str, default: Any = _MISSING) -> "Node | None":
+        sub = f"{self.path}.{key}" if self.path else key
         if key in self.value:
-            sub = f"{self.path}.{key}" if self.path else key
             return Node(self.value[key], sub, self.source)
         if default is _MISSING:
             raise self.fail(f"missing required key '{key}'")
-        return None if default is None else Node(default, f"{self.path}.{key}", self.source)
+        return None if default is None else Node(default, sub, self.source)
 
     def has(self, key: str) -> bool:
         return isinstance(self.value, dict) and key in self.value

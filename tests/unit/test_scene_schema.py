@@ -44,7 +44,9 @@ def edit(fn):
     (lambda d: d["loads"]["forces"]["f"].update(node="middle"), "s.yaml:loads.forces.f.node: unknown node 'middle'"),
     (lambda d: d["solver"].update(dt=0), "s.yaml:solver.dt: expected a positive number (s), got 0.0"),
     (lambda d: d["nodes"].update(lonely=[5, 5, 5]), "s.yaml:nodes: node(s) ['lonely'] are not used by any member or shell"),
-    (lambda d: d["members"]["beam"].update(actuator={"variant": "bar"}), "only members of kind 'actuator' take an 'actuator' block"),
+    # a key that applies to some values of an earlier key only: one message for every such key (schema ``when``)
+    (lambda d: d["members"]["beam"].update(actuator={"variant": "bar"}),
+     "s.yaml:members.beam.actuator: key(s) ['actuator'] apply to kind: actuator only (kind is 'frame')"),
     (lambda d: d["outputs"].update(x={"kind": "actuator_force", "actuator": "beam"}), "member 'beam' is not an actuator"),
 ])
 def test_errors_name_file_key_value_and_expectation(mutate, expected):

@@ -96,8 +96,9 @@ def _edit(path: str, value):
      "supports[1]:", "shell 'hemi' does not meet the plane z = 9.51057 at a right angle"),
     (_edit("supports.0.type", "clamp"), "supports[0]",
      "key(s) ['normal'] do not apply to an edge support of type 'clamp'"),
+    # every case of a keyed form names its missing keys the same way (the type, the keys, what they mean)
     (_edit("supports.2", {"node": "hemi.A", "type": "roller"}), "supports[2]",
-     "a roller support needs 'normal'"),
+     "a 'roller' support needs ['normal'] (the plane's normal along x, y or z, e.g. [1, 0, 0])"),
 ])
 def test_bad_shell_vocabulary_names_the_key_and_the_reason(edit, where, text):
     d = copy.deepcopy(_hemisphere())
