@@ -75,20 +75,32 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
 
 def _sections(scene: Scene) -> dict[str, secmod.SectionProperties]:
     """Section properties per section name (SI: m², m⁴), with the Poisson ratio of the first
-    member's material that uses the section (0 if none does) for the shear factor."""
+    member's material that uses the section (0 if none does) for the shear factor; a SceneError
+    naming ``file:sections.NAME`` for dimensions whose properties leave floating point."""
     mats = scene.materials
     secs: dict[str, secmod.SectionProperties] = {}
     for name, spec in scene.sections.items():
         used_nu = [mats[m.material].nu for m in scene.members.values() if m.section == name]
         nu = used_nu[0] if used_nu else 0.0
-        if spec.shape == "rectangle":
-            p = secmod.rectangle(*spec.dims, nu)
-        elif spec.shape == "circle":
-            p = secmod.circle(*spec.dims, nu)
-        else:
-            p = secmod.tube(*spec.dims, nu)
+        p = _section_properties(spec, nu)
+        if p is None or not all(math.isfinite(x) and x > 0.0 for x in (p.area, p.i1, p.i2, p.torsion)):
+            # r⁴ of r = 1e300 m overflows, of r = 1e-300 m underflows to 0 (then divides by zero)
+            raise SceneError(f"{scene.source}:sections.{name}",
+                             f"the {spec.shape} {list(spec.dims)} m has no positive, finite area, second moments "
+                             f"and torsion constant in double precision; expected the dimensions of a real section")
         secs[name] = secmod.with_overrides(p, spec.torsion_constant, spec.shear_factor)
     return secs
+
+
+def _section_properties(spec, nu: float) -> secmod.SectionProperties | None:
+    """The computed properties of a section spec, None when they overflow or divide by zero (the
+    caller checks them finite: numpy's overflow is no warning printed to the user)."""
+    make = {"rectangle": secmod.rectangle, "circle": secmod.circle, "tube": secmod.tube}[spec.shape]
+    try:
+        with np.errstate(all="ignore"):
+            return make(*spec.dims, nu)
+    except ArithmeticError:
+        return None
 
 
 # -- prescribed DOFs and drives ---------------------------------------------------------------
@@ -105,16 +117,16 @@ class Prescribed:
 
 def _prescribed(scene: Scene, dofs: DofTable) -> Prescribed:
     """Prescribed DOFs of the supports (shell edges, then nodes in scene order) and the drives of
-    the driven ones; a SceneError naming ``file:supports`` for a revolute axis that is no section
-    vector, or the shells' edge-support errors."""
+    the driven ones; a SceneError naming ``file:supports[i].axis`` for a revolute axis that is no
+    section vector, or the shells' edge-support errors."""
     fixed = np.zeros(dofs.ndof, dtype=bool)
     drive_rows: list[tuple] = []
     drive_vectors: list[tuple] = []
     for ids in edge_support_dofs(scene, dofs.shells):
         fixed[ids] = True
-    for s in scene.supports:
+    for i, s in enumerate(scene.supports):
         if s.edge is None:
-            _node_support(scene, s, dofs, fixed, drive_rows, drive_vectors)
+            _node_support(scene, s, f"{scene.source}:supports[{i}]", dofs, fixed, drive_rows, drive_vectors)
     free = np.nonzero(~fixed)[0].astype(np.int64)
     free_index = np.full(dofs.ndof, -1, dtype=np.int64)
     free_index[free] = np.arange(free.size)
@@ -122,11 +134,12 @@ def _prescribed(scene: Scene, dofs: DofTable) -> Prescribed:
     return Prescribed(free, free_index, _drives(drive_rows, drive_vectors))
 
 
-def _node_support(scene: Scene, s, dofs: DofTable, fixed: np.ndarray, drive_rows: list, drive_vectors: list) -> None:
-    """Mark the DOFs support ``s`` (at a node) prescribes in ``fixed (ndof,)``; a driven support
-    appends (position ids (3,), Y⁰ (m), direction, distance signal, axis, angle signal) to
-    ``drive_rows`` and, per frame section vector it turns, (ids (3,), V⁰, drive row) to
-    ``drive_vectors``."""
+def _node_support(scene: Scene, s, where: str, dofs: DofTable, fixed: np.ndarray, drive_rows: list,
+                  drive_vectors: list) -> None:
+    """Mark the DOFs support ``s`` (at a node; ``file:supports[i]`` for errors) prescribes in
+    ``fixed (ndof,)``; a driven support appends (position ids (3,), Y⁰ (m), direction, distance
+    signal, axis, angle signal) to ``drive_rows`` and, per frame section vector it turns, (ids (3,),
+    V⁰, drive row) to ``drive_vectors``."""
     n = dofs.node_lookup[s.node]
     node_ydofs = dofs.node_ydofs
     if s.type == "clamp" and s.member is None:      # a member's clamp leaves a hinged shell free
@@ -144,7 +157,7 @@ def _node_support(scene: Scene, s, dofs: DofTable, fixed: np.ndarray, drive_rows
         mi = dofs.member_infos[dofs.member_lookup[s.member]]
         k = int(np.nonzero(mi.nodes == n)[0][0])
         _, _, v1, v2 = dofs.member_geom[s.member]
-        off = _axis_offset(f"{scene.source}:supports", s.member, s.node, v1[k], v2[k], np.asarray(s.axis))
+        off = _axis_offset(f"{where}.axis", s.member, s.node, v1[k], v2[k], np.asarray(s.axis))
         fixed[mi.vdofs[k, off:off + 3]] = True
     if s.type in ("clamp", "fixed_vector", "driven"):
         for mi in dofs.member_infos:

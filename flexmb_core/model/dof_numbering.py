@@ -167,7 +167,7 @@ def _number_member(scene: Scene, mem: Member, table: DofTable) -> None:
     is_frame = mem.kind == "frame" or (mem.kind == "actuator" and mem.actuator.variant == "frame")
     yd, vd = _number_member_dofs(ids, table.ydof, table.node_x, x, v1, v2, is_frame, table.take)
     if mem.kind == "actuator" and mem.arc_center is not None:
-        raise SceneError(f"{scene.source}:members.{mem.name}", "actuators must be straight (no 'arc')")
+        raise SceneError(f"{scene.source}:members.{mem.name}.arc", "actuators must be straight (no 'arc')")
     table.member_infos.append(MemberInfo(mem.name, mem.kind, ids, yd, vd, member_length(x)))
 
 

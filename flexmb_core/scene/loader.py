@@ -22,7 +22,7 @@ from .include import compose
 from .limits import DEFAULT_LIMITS, Limits, over_limit
 from .reader import Node
 from .schema import Joint, Member, Scene, SceneFile, ShellJoint, SolverSpec
-from .shells import check_shell, check_shell_joint, edge_ref, named_points, place_points
+from .shells import check_shell, check_shell_joint, edge_ref, named_points, point_reader
 from .typed import check_keys, read, read_key
 
 
@@ -63,29 +63,12 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     root = check_keys(Node(data, "", source), SceneFile)
     block = functools.partial(read_key, root, SceneFile)
     name, description = block("name"), block("description")
-    materials = block("materials")
-    if not materials:
-        raise root.fail("at least one material is required", "materials")
-    sections = block("sections")
-    nodes = block("nodes")
-    members = block("members", {"node": nodes, "material": materials, "section": sections})
-    for k, m in members.items():
-        _check_member(root.get("members").get(k), m, nodes)
-    shells = block("shells", {"node": nodes, "material": materials})
-    for k, sh in shells.items():
-        check_shell(root.get("shells").get(k), sh, materials, nodes)
-    shells, points = named_points(root.get("shells", {}), shells, nodes)
-    root = place_points(root, shells, points)         # node: {shell, at} → a generated point name
-    block = functools.partial(read_key, root, SceneFile)
-    if not members and not shells:
-        raise root.fail("a scene needs at least one member or one shell", "members")
-    clash = sorted(set(members) & set(shells))
-    if clash:
-        raise root.fail(f"name(s) {name_list(clash)} are used by both a member and a shell; names must be unique", "shells")
-
+    materials, sections, nodes, members = _frame_parts(root, block)
+    shells, points = _shell_parts(root, block, materials, nodes, members)
     edge = functools.partial(edge_ref, shells=shells)
-    refs = {"node": {**nodes, **{k: p.at for k, p in points.items()}},    # what supports, loads, outputs may name
-            "member": members, "shell": shells, "edge": edge}
+    names = {**nodes, **{k: p.at for k, p in points.items()}}      # what supports, loads, outputs may name
+    refs = {"node": names, "member": members, "shell": shells, "edge": edge,
+            "point": point_reader(shells, points, names)}          # node: {shell, at} → 'shell@key'
     supports = block("supports", refs)
     for n, s in zip(_items(root, "supports"), supports):
         if s.member is not None and s.node not in (members[s.member].start, members[s.member].end):
@@ -99,11 +82,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
     outputs = block("outputs", refs)
     for k, out in outputs.items():
         _check_output(root.get("outputs").get(k), out, members)
-    commands = block("commands", {"member": members})
-    if commands is not None:
-        for n, a in zip(root.get("commands").get("actuators").list(), commands.actuators):
-            if members[a].kind != "actuator":
-                raise n.fail(f"member '{a}' is not an actuator (kind '{members[a].kind}')")
+    commands = _commands(root, block, members)
     joints = block("joints", {"node": nodes, "member": members, "shell": shells, "edge": edge})
     for n, j in zip(_items(root, "joints"), joints):
         if isinstance(j, Joint):
@@ -117,6 +96,43 @@ def scene_from_dict(data: Any, source: str = "<dict>",
                  tuple(j for j in joints if isinstance(j, ShellJoint)),
                  tuple(loads.edge_forces.values()) + tuple(loads.edge_moments.values()), tuple(points.values()),
                  block("limits"))
+
+
+def _frame_parts(root: Node, block) -> tuple[dict, dict, dict, dict[str, Member]]:
+    """Materials, sections, nodes and the members that name them."""
+    materials = block("materials")
+    if not materials:
+        raise root.fail("at least one material is required", "materials")
+    sections = block("sections")
+    nodes = block("nodes")
+    members = block("members", {"node": nodes, "material": materials, "section": sections})
+    for k, m in members.items():
+        _check_member(root.get("members").get(k), m, nodes)
+    return materials, sections, nodes, members
+
+
+def _shell_parts(root: Node, block, materials: dict, nodes: dict, members: dict) -> tuple[dict, dict]:
+    """The shells (with their named mesh points) and those points, ``{"shell.point": ShellPoint}``."""
+    shells = block("shells", {"node": nodes, "material": materials})
+    for k, sh in shells.items():
+        check_shell(root.get("shells").get(k), sh, materials, nodes)
+    shells, points = named_points(root.get("shells", {}), shells, nodes)
+    if not members and not shells:
+        raise root.fail("a scene needs at least one member or one shell", "members")
+    clash = sorted(set(members) & set(shells))
+    if clash:
+        raise root.fail(f"name(s) {name_list(clash)} are used by both a member and a shell; names must be unique", "shells")
+    return shells, points
+
+
+def _commands(root: Node, block, members: dict[str, Member]):
+    """The command program; what it drives must be actuators."""
+    commands = block("commands", {"member": members})
+    if commands is not None:
+        for n, a in zip(root.get("commands").get("actuators").list(), commands.actuators):
+            if members[a].kind != "actuator":
+                raise n.fail(f"member '{a}' is not an actuator (kind '{members[a].kind}')")
+    return commands
 
 
 def _items(root: Node, key: str) -> list[Node]:

@@ -112,8 +112,9 @@ class Node:
         if not isinstance(v, list) or len(v) != n:
             raise self.fail(f"expected a list of {n} numbers{' (' + unit + ')' if unit else ''}, got {excerpt(v)}")
         out = tuple(Node(x, f"{self.path}[{i}]", self.source).number() for i, x in enumerate(v))
-        if nonzero and all(x == 0.0 for x in out):
-            raise self.fail(f"expected a non-zero vector, got {excerpt(v)}")
+        if nonzero and not 0.0 < sum(x * x for x in out) < math.inf:    # [1e-300, 0, 0] underflows
+            raise self.fail(f"expected a non-zero vector (a direction; its squared length a positive, finite "
+                            f"double), got {excerpt(v)}")
         return out
 
     def numbers(self, *, min_len: int = 1) -> tuple[float, ...]:

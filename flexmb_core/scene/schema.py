@@ -20,6 +20,8 @@ from ..errors import excerpt, name_list
 from .typed import Invalid, OneOf, spec
 
 Vec3 = tuple[float, float, float]
+# A ``node`` key with ``in_place="point"`` also takes a mesh point by coordinates instead of a name,
+# ``node: {shell, at, edge?, tolerance?}`` (a :class:`ShellPoint` named ``shell@key``).
 
 
 def unit3(v: tuple[float, ...]) -> tuple[float, float, float]:
@@ -248,8 +250,15 @@ class ActuatorSpec:
 
 @dataclass(frozen=True)
 class MassOverride:
+    """``mass: {per_length, rotary_inertia}``: the member's own inertia data in place of the section's."""
+
     per_length: float | None = spec(None, positive=True, unit="kg/m")            # ρA
     rotary_inertia: tuple[float, float] | None = spec(None, unit="kg·m")          # (ρI1, ρI2)
+
+    def check(self) -> None:
+        if self.rotary_inertia is not None and not min(self.rotary_inertia) > 0.0:   # scales the mass by √ratio
+            raise Invalid(f"expected positive rotary inertias [ρI1, ρI2] (kg·m), got {list(self.rotary_inertia)}",
+                          "rotary_inertia")
 
 
 @dataclass(frozen=True)
@@ -299,6 +308,8 @@ class Member:
             raise Invalid(f"bars are 2-node elements (order 1), got order {self.order}", "order")
         if bar and self.arc_center is not None:
             raise Invalid("arcs are for frame members", "arc")
+        if self.kind == "actuator" and self.arc_center is not None:
+            raise Invalid("actuators must be straight (no 'arc')", "arc")
         if self.start in self.via or self.end in self.via or len(set(self.via)) != len(self.via):
             raise Invalid(f"'via' must list distinct interior nodes, got {name_list(self.via)}", "via")
 
@@ -625,7 +636,7 @@ class NodeSupport:
     """``{node, type: clamp | ball, member?}``: Y (and a clamp's vectors; of ``member`` only, when given) fixed."""
 
     type: str = spec(yaml=False)
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     member: str | None = spec(None, ref="member")
 
     def build(self) -> Support:
@@ -637,7 +648,7 @@ class RollerSupport:
     """``{node, type: roller, normal}``: the position along the axis ``normal`` only."""
 
     type: str = spec(yaml=False)
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     normal: Vec3 = spec(**_NORMAL)
 
     def check(self) -> None:
@@ -801,7 +812,7 @@ JOINTS = OneOf("type", {"spherical": MemberJoint, "revolute": RevoluteJoint, "ri
 @dataclass(frozen=True)
 class Force:
     name: str = spec(yaml=False)
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     force: Vec3 = spec(unit="N")
     signal: Signal = spec(default_factory=Signal)
 
@@ -822,7 +833,7 @@ class Moment:
 @dataclass(frozen=True)
 class PointMass:
     name: str = spec(yaml=False)
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     mass: float = spec(positive=True, unit="kg")
 
 
@@ -996,7 +1007,7 @@ class _Output:
 class NodeOutput(_Output):
     """``node_position``, ``node_displacement``: a node (or mesh point)."""
 
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
 
     def build(self) -> Output:
         return Output(self.name, self.kind, self.node)
@@ -1006,7 +1017,7 @@ class NodeOutput(_Output):
 class SectionVectorsOutput(_Output):
     """``section_vectors``: V1, V2 of ``member`` at its end ``node``."""
 
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     member: str = spec(ref="member")
 
     def build(self) -> Output:
@@ -1060,7 +1071,7 @@ class JointAngleOutput(_Output):
     """``joint_angle``: rotation about a revolute axis at ``node`` of 1 member (to its reference)
     or of the second of 2 ``members`` relative to the first (rad)."""
 
-    node: str = spec(ref="node")
+    node: str = spec(ref="node", in_place="point")
     members: tuple[str, ...] = spec(ref="member")
 
     def check(self) -> None:

@@ -16,7 +16,6 @@ import dataclasses
 import math
 
 from ..errors import excerpt
-from .overrides import set_path
 from .reader import Node
 from .schema import EdgeRef, Shell, ShellJoint, ShellMeshSpec, ShellPoint
 from .typed import read
@@ -96,30 +95,18 @@ def _point(p: Node, shells: dict[str, Shell], **given) -> ShellPoint:
     return point
 
 
-NODE_REF_PLACES = (("supports", "list"), ("loads.forces", "map"), ("point_masses", "map"), ("outputs", "map"))
-
-
-def place_points(root: Node, shells, points: dict[str, ShellPoint]) -> Node:
-    """Replace every ``node: {shell, at, …}`` of supports, forces, point masses and outputs by a
-    generated name ``shell@key`` registered in ``points`` (in a copy of the scene mapping; the
-    caller's data stay untouched)."""
-    data = dict(root.value)
-    for place, how in NODE_REF_PLACES:
-        block: object = data
-        for key in place.split("."):
-            block = block.get(key) if isinstance(block, dict) else None
-        if not isinstance(block, (list, dict)):
-            continue
-        entries = enumerate(block) if how == "list" else block.items()
-        for key, entry in list(entries):
-            if not (isinstance(entry, dict) and isinstance(entry.get("node"), dict)):
-                continue
-            path = f"{place}[{key}]" if how == "list" else f"{place}.{key}"
-            point = _point(Node(entry["node"], f"{path}.node", root.source), shells, name="", where=f"{path}.node.at")
-            name = f"{point.shell}@{path}"
-            points[name] = dataclasses.replace(point, name=name)
-            set_path(data, place.split(".") + [str(key), "node"], name, item=path)
-    return Node(data, root.path, root.source)
+def point_reader(shells: dict[str, Shell], points: dict[str, ShellPoint], names: dict):
+    """The reader of a mesh point given in place of a node name, ``node: {shell, at, edge?,
+    tolerance?}`` (the schema's ``in_place="point"``): a :class:`ShellPoint` named ``shell@key``
+    (``key`` the entry that holds ``node``, e.g. ``hemi@loads.forces.pull``), registered in
+    ``points`` and in the node ``names`` later keys may refer to."""
+    def read_point(n: Node) -> str:
+        point = _point(n, shells, name="", where=f"{n.path}.at")
+        name = f"{point.shell}@{n.path.removesuffix('.node')}"
+        points[name] = dataclasses.replace(point, name=name)
+        names[name] = point.at
+        return name
+    return read_point
 
 
 def edge_ref(n: Node, shells) -> EdgeRef:

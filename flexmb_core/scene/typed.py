@@ -45,6 +45,8 @@ class Spec:
     ``nonzero``: a vector must not be all zeros. ``min_len``: a list of numbers has at least this
     many. ``ref``: the value names something defined elsewhere (``node``, ``member``, …): the
     reader's ``refs[ref]`` is the table of names, or a function of the :class:`Node` that reads it.
+    ``in_place``: a mapping given instead of the name is read by ``refs[in_place]`` (a function
+    of the :class:`Node` returning the name it registers: a mesh point given by coordinates).
     ``form``: the dataclass or :class:`OneOf` the YAML is read as (for a ``dict`` or a
     ``tuple[X, ...]``: each item's). ``expected``/``hint``: the message for a value of the wrong
     type or out of range, ``expected {expected}, got {value} {hint}``. ``default_from``: the
@@ -65,6 +67,7 @@ class Spec:
     nonzero: bool = False
     min_len: int = 1
     ref: str | None = None
+    in_place: str | None = None
     form: Any = None
     expected: str | None = None
     hint: str = ""
@@ -217,6 +220,8 @@ class _Reader:
         form = s.form or (getattr(tp, "yaml_form", None) if isinstance(tp, type) else None)
         if form is not None:
             return self._form(node, form, given)
+        if s.in_place is not None and isinstance(node.value, dict):
+            return self.refs[s.in_place](node)
         if s.ref is not None:
             return self._ref(node, s.ref)
         if origin is tuple:

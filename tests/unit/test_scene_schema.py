@@ -43,6 +43,18 @@ def edit(fn):
     (lambda d: d["supports"].append({"node": "tip", "type": "weld"}), "s.yaml:supports[1].type: expected one of"),
     (lambda d: d["loads"]["forces"]["f"].update(node="middle"), "s.yaml:loads.forces.f.node: unknown node 'middle'"),
     (lambda d: d["solver"].update(dt=0), "s.yaml:solver.dt: expected a positive number (s), got 0.0"),
+    # a direction whose length under- or overflows (it used to escape as ZeroDivisionError)
+    (lambda d: d["members"]["beam"].update(up=[0.0, 0.0, 1e-300]),
+     "s.yaml:members.beam.up: expected a non-zero vector (a direction; its squared length a positive, finite "
+     "double), got [0.0, 0.0, 1e-300]"),
+    # section properties out of double range (OverflowError, ZeroDivisionError in compile_scene before)
+    (lambda d: d["sections"]["s"].update(width=1e300), "s.yaml:sections.s: the rectangle [1e+300, 0.02] m has no "
+     "positive, finite area, second moments and torsion constant in double precision"),
+    (lambda d: d["sections"].update(s={"shape": "circle", "radius": 1e-300}), "s.yaml:sections.s: the circle "
+     "[1e-300] m has no positive, finite area"),
+    # a negative rotary inertia made NaN mass entries (√ of the ratio to the section's own)
+    (lambda d: d["members"]["beam"].update(mass={"rotary_inertia": [1e-3, -1e-3]}),
+     "s.yaml:members.beam.mass.rotary_inertia: expected positive rotary inertias [ρI1, ρI2] (kg·m), got [0.001, -0.001]"),
     (lambda d: d["nodes"].update(lonely=[5, 5, 5]), "s.yaml:nodes: node(s) ['lonely'] are not used by any member or shell"),
     # a key that applies to some values of an earlier key only: one message for every such key (schema ``when``)
     (lambda d: d["members"]["beam"].update(actuator={"variant": "bar"}),
@@ -51,6 +63,30 @@ def edit(fn):
 ])
 def test_errors_name_file_key_value_and_expectation(mutate, expected):
     assert expected in _err(edit(mutate))
+
+
+def test_compile_errors_name_the_key():
+    """Errors found while compiling name the key they are about, not only its block."""
+    import dataclasses
+
+    d = base()
+    d["supports"] = [{"node": "root", "type": "revolute", "member": "beam", "axis": [1.0, 1.0, 0.0]}]
+    msg = _err(d)
+    assert msg.startswith("s.yaml:supports[0].axis: member 'beam' has no section vector along the axis "), msg
+    assert "set the member's 'up' to the axis so that V2 lies on it" in msg
+    # an actuator on an arc: refused by the schema from a file, and by the compiler from Python
+    d = base()
+    d["sections"]["s"] = {"shape": "circle", "radius": 0.01}
+    d["nodes"]["foot"] = [0.0, -1.0, 0.0]
+    d["members"]["lift"] = {"kind": "actuator", "from": "foot", "to": "tip", "material": "m", "section": "s",
+                            "arc": {"center": [0.0, 0.0, 0.0]}}
+    assert _err(d) == "s.yaml:members.lift.arc: actuators must be straight (no 'arc')"
+    del d["members"]["lift"]["arc"]
+    scene = scene_from_dict(d, source="s.yaml")
+    bent = dataclasses.replace(scene.members["lift"], arc_center=(0.0, 0.0, 0.0))
+    with pytest.raises(SceneError) as info:
+        compile_scene(dataclasses.replace(scene, members={**scene.members, "lift": bent}))
+    assert str(info.value) == "s.yaml:members.lift.arc: actuators must be straight (no 'arc')"
 
 
 def test_yaml_file_errors_name_the_file(tmp_path):
