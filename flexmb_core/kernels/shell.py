@@ -12,10 +12,50 @@ contract the way bending with ν ≠ 0 requires, and the full 3D Saint-Venant–
 ``S = λ tr(E) I + 2μ E`` is used as it is (no plane-stress condensation, no Poisson locking).
 ``F = A¹ (A⁰)⁻¹`` with ``A = [∂/∂ξ1, ∂/∂ξ2, ∂/∂ζ]`` is linear in Y and G for fixed a and bilinear
 in (a, G): the only second derivatives of F are the (a, G) cross terms, which enter the geometric
-part of the tangent. The strain energy ``∫ ½ S : E dV₀`` is integrated by a triangle rule times
+part of the tangent. The strain energy ``∫ ½ S : E* dV₀`` is integrated by a triangle rule times
 Gauss points through the thickness; the tangent is exact (``tests/unit/test_shell_kernel.py``).
-The kernel sums the points through the thickness in 21 node-independent "virtual" unknowns and
-spreads them over the 70 once per in-plane point (:func:`shell_element`, Notes).
+
+Assumed strains (membrane and transverse-shear locking, issue 16)
+-----------------------------------------------------------------
+The strain the law sees is ``E* = E + (A⁰)⁻ᵀ ΔÊ (A⁰)⁻¹``: at every point the covariant components
+Ê = A⁰ᵀ E A⁰ (convected ξ1, ξ2, ζ) of the membrane (Ê11, Ê22, Ê12) and transverse-shear (Ê13, Ê23)
+strain have their *thickness mean* m (weights w/Ω, Ω = Σ_ζ w the point's area weight) replaced:
+
+    membrane:  m* = Π₁ m + s (m − Π₁ m)        shear:  m* = Π₂ m
+
+where Πₖ is the element's L2 projection (weights Ω) onto polynomials of degree k in (ξ1, ξ2);
+the parts that vary through the thickness (bending) and Ê33 are kept. E* is a linear map of the
+point strains with constant per-element coefficients, so the energy is a pure energy of q_e:
+the residual is ∂U*/∂q_e and the tangent its exact, symmetric derivative; rigid motions leave E
+and so E* at zero. Constant strains are in every Πₖ (patch tests pass), and a flat element has
+s = 1 (its membrane strains are kept as they are).
+
+Why this choice (measured on the linearized element, then on the kernel; ``docs/benchmarks/
+shell_locking.md``): the pinched hemisphere (doubly curved, R/t = 250) is −46 %, −10 %, −3 % off at
+4×4, 6×6, 8×8 cells per quarter. Projecting the membrane strain onto P₂ — the MITC6-like choice, the
+highest degree that leaves a flat element without spurious modes — only reaches −30 %, −6 %,
+−1.7 %; P₁ reaches −0.5 %, +0.4 %, +0.3 %, but a single flat element then has 8 zero-energy modes
+(in-plane: 17 compatible quadratic strain modes against 9 projected ones) and a cylindrical one 3.
+So the membrane part beyond P₁ is kept with the weight s = 1/√(1 + (α h_e² κ_e / t)²), α = 1/4 (h_e
+the longest edge, κ_e the largest principal curvature of the reference element, t the thickness;
+:func:`flexmb_core.model.shell_geometry.membrane_weight`): h²κ/t is the ratio that sets membrane
+locking of a curved element, so s → 1 on flat elements and under refinement (the element converges
+to the unprojected one) and is small only where the element would lock; every element keeps exactly
+the 6 rigid zero-energy modes. α = 1 relieved more but let a 2 × 2 octant of the pinched cylinder
+(45° per element) come out 47 % too soft with one diagonal pattern; with α = 1/4 no pattern
+overshoots. Transverse shear matters on the pinched cylinder (8×8: −8.4 % unprojected, −2.4 % with
+the membrane remedy and P₂ shear; −3.7 % with P₂ shear alone) and on thin plates; P₂ — one degree
+below the cubic interpolation — adds no zero-energy mode (P₁ would add 4).
+
+Kernel structure. The kernel sums the points through the thickness in 21 node-independent
+"virtual" unknowns and spreads them over the 70 once per in-plane point (:func:`shell_element`,
+Notes). The projection couples the in-plane points, so the element takes three passes: strains
+(:func:`_strains`, then :func:`_project`), stresses of E* (:func:`_stresses`, then
+:func:`_back_project`: the effective stress S + ΔS whose work on δE equals the work of S* on δE*),
+and the residual/tangent pass of the raw kernel with the effective stress, plus the tangent's
+projected parts: per in-plane point within its 21 virtual unknowns, and a rank-21 update over the
+projected modes (:func:`_coupled_update`). ``mat`` carries the correction weights (γ_m = 1 − s for
+the membrane, γ_s = 1 for the shear): with both 0 the kernel is the unprojected element.
 """
 
 from __future__ import annotations
@@ -29,9 +69,10 @@ NODES = 10          # cubic triangle
 NDOF_NODE = 7       # Y, G, a
 NLOC = NODES * NDOF_NODE
 
-# Columns of the per-element material table ``mat[e]``.
-SMAT_LAMBDA, SMAT_MU, SMAT_H = 0, 1, 2
-N_SMAT = 3
+# Columns of the per-element material table ``mat[e]``: Lamé λ, μ (Pa), half thickness (m), and the
+# weights of the assumed-strain corrections of the membrane (1 − s) and transverse-shear strains.
+SMAT_LAMBDA, SMAT_MU, SMAT_H, SMAT_GM, SMAT_GS = 0, 1, 2, 3, 4
+N_SMAT = 5
 
 
 # Virtual unknowns v = 7b + ν (b: φ, φ,1, φ,2; ν: Y0 Y1 Y2 G0 G1 G2 a) and the scratch rows.
@@ -44,14 +85,45 @@ NB = 4              # in-plane points whose Sᵀ T is added to K_e in one pass
 C_T = 6             # cb rows: w C B (0–5), T = H S of the NB batch slots (21 rows each), their s_ℓ (3 rows each)
 C_S = C_T + NB * NV
 
+# Assumed strains. Projected covariant components c = (a, b): 11, 22, 12 (membrane), 13, 23 (shear).
+NC = 5
+COMP_A = (0, 1, 0, 0, 1)
+COMP_B = (0, 1, 1, 2, 2)
+NM_M, NM_S = 3, 6                   # modes: P1 (1, x, y) for the membrane, P2 (…, x², xy, y²) for the shear
+NMODE = 3 * NM_M + 2 * NM_S         # 21 projected coefficients; row r = 3c + k (c < 3), 9 + 6(c − 3) + k
+IN_PLANE_MAX = 64                   # 8 × 8 in-plane rule (the schema's largest)
+NPT_MAX = IN_PLANE_MAX * 6          # × 6 points through the thickness
+# (ξ1, ξ2) of the nodes (LOCAL_NODES_3L / 3): the cubic reproduces them, so Σ φ ξℓ is a point's (ξ1, ξ2).
+NODE_XI1 = np.array([0.0, 1.0, 0.0, 1 / 3, 2 / 3, 2 / 3, 1 / 3, 0.0, 0.0, 1 / 3])
+NODE_XI2 = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 1 / 3, 2 / 3, 2 / 3, 1 / 3, 1 / 3])
+# f: rows F_PT + p per point (F 3×3, E, A⁰ 3×3, S* of E*), rows F_IP + i per in-plane point.
+F_PT = N_F
+F_IP = F_PT + NPT_MAX
+N_FROW = F_IP + IN_PLANE_MAX
+PT_F, PT_E, PT_A, PT_S = 0, 9, 15, 24
+IP_PSI, IP_OM, IP_M, IP_D, IP_T, IP_U, IP_P0, IP_P1 = 0, 6, 7, 12, 17, 22, 27, 28
+N_FCOL = 30
+# bmat (21 columns): the point's ∂m/∂v (Mv), Lᵀ w C B (Z), Z − Q γ Mv (Y), the modes' G, the Gram
+# inverses, Q = Σ w Lᵀ C L, and the point's L (E from ΔÊ) and R (Ê from E) in Voigt form.
+B_MV, B_Z, B_Y, B_G = 27, 32, 37, 42
+B_MI1, B_MI2 = 63, 66
+B_Q, B_LV, B_RV = 72, 77, 83
+N_BROW = 88
+# cb (70 columns): the projected coefficients' ∂c (Cm), their coupling W, and per in-plane point Mv S, Y S.
+C_CM = C_S + 3 * NB
+C_W = C_CM + NMODE
+C_MS = C_W + NMODE
+C_YS = C_MS + NC
+N_CBROW = C_YS + NC
+
 
 @njit(cache=True)
 def _fields(qe, phi, dphi, p):
     """y,1 y,2; g g,1 g,2; a a,1 a,2 at point ``p`` (an 18-tuple). Plain IEEE rounding here, in
-    :func:`_strain_stress` and in :func:`shell_element` (which inlines both; fastmath there fuses
-    their products too): E of a small strain is a small difference of F's products, and this keeps
-    F, E, S and U bit-identical to the per-node form of the kernel (a contracted F moved r_e of a
-    nearly unstrained panel by 1e-7 of its size)."""
+    :func:`_deformation` and :func:`_stresses` (fastmath would fuse their products): E of a small
+    strain is a small difference of F's products, and this keeps F, E and S rounded as the
+    per-node form of the kernel rounded them (a contracted F moved r_e of a nearly unstrained panel
+    by 1e-7 of its size)."""
     y1x = 0.0; y1y = 0.0; y1z = 0.0
     y2x = 0.0; y2y = 0.0; y2z = 0.0
     gx = 0.0; gy = 0.0; gz = 0.0
@@ -75,9 +147,9 @@ def _fields(qe, phi, dphi, p):
 
 
 @njit(cache=True)
-def _strain_stress(fl, z, hh, a0inv, p, lam_l, mu, f):
-    """F (into ``f[0:3]``), the SVK stress S and S : E at thickness coordinate ``z`` of point ``p``
-    from the fields ``fl`` of :func:`_fields`. Returns (S00, S11, S22, S01, S02, S12, S : E)."""
+def _deformation(fl, z, hh, a0inv, p, f):
+    """F = A¹ (A⁰)⁻¹ into ``f[0:3, 0:3]`` at thickness coordinate ``z`` of point ``p`` from the
+    fields ``fl`` of :func:`_fields`."""
     y1x, y1y, y1z, y2x, y2y, y2z, gx, gy, gz, g1x, g1y, g1z, g2x, g2y, g2z, aa, a1, a2 = fl
     q1x = a1 * gx + aa * g1x; q1y = a1 * gy + aa * g1y; q1z = a1 * gz + aa * g1z
     q2x = a2 * gx + aa * g2x; q2y = a2 * gy + aa * g2y; q2z = a2 * gz + aa * g2z
@@ -100,21 +172,363 @@ def _strain_stress(fl, z, hh, a0inv, p, lam_l, mu, f):
         f[0, j] = c0x * i0 + c1x * i1 + c2x * i2
         f[1, j] = c0y * i0 + c1y * i1 + c2y * i2
         f[2, j] = c0z * i0 + c1z * i1 + c2z * i2
-    # Green–Lagrange strain and the SVK stress.
-    e00 = 0.5 * (f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0] - 1.0)
-    e11 = 0.5 * (f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1] - 1.0)
-    e22 = 0.5 * (f[0, 2] * f[0, 2] + f[1, 2] * f[1, 2] + f[2, 2] * f[2, 2] - 1.0)
-    e01 = 0.5 * (f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1])
-    e02 = 0.5 * (f[0, 0] * f[0, 2] + f[1, 0] * f[1, 2] + f[2, 0] * f[2, 2])
-    e12 = 0.5 * (f[0, 1] * f[0, 2] + f[1, 1] * f[1, 2] + f[2, 1] * f[2, 2])
-    tr = e00 + e11 + e22
-    s00 = lam_l * tr + 2.0 * mu * e00
-    s11 = lam_l * tr + 2.0 * mu * e11
-    s22 = lam_l * tr + 2.0 * mu * e22
-    s01 = 2.0 * mu * e01
-    s02 = 2.0 * mu * e02
-    s12 = 2.0 * mu * e12
-    return s00, s11, s22, s01, s02, s12, s00 * e00 + s11 * e11 + s22 * e22 + 2.0 * (s01 * e01 + s02 * e02 + s12 * e12)
+
+
+@njit(cache=True)
+def _run_end(phi, dphi, p0):
+    """End (exclusive) of the run of points through the thickness that share point ``p0``'s
+    in-plane position (consecutive rows of ``phi``/``dphi`` equal)."""
+    npt = phi.shape[0]
+    p1 = p0 + 1
+    while p1 < npt:
+        for n in range(NODES):
+            if (phi[p1, n] != phi[p0, n] or dphi[p1, n, 0] != dphi[p0, n, 0]
+                    or dphi[p1, n, 1] != dphi[p0, n, 1]):
+                return p1
+        p1 += 1
+    return p1
+
+
+@njit(cache=True)
+def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f):
+    """Pass 1: F, E = ½(FᵀF − I) and A⁰ = ((A⁰)⁻¹)⁻¹ of every point into its ``f`` row; per in-plane
+    point i the basis ψ = (1, x, y, x², xy, y²) (x = ξ1 − ⅓, y = ξ2 − ⅓), Ω = Σ w, the thickness
+    mean m of Ê11, Ê22, Ê12, Ê13, Ê23 (weights w/Ω) and its run of points. Returns the number of
+    in-plane points."""
+    npt = w.shape[0]
+    nip = npt * 0
+    p0 = npt * 0
+    while p0 < npt:
+        p1 = _run_end(phi, dphi, p0)
+        fl = _fields(qe, phi, dphi, p0)
+        r = F_IP + nip
+        x = -1.0 / 3.0
+        y = -1.0 / 3.0
+        for n in range(NODES):
+            x += phi[p0, n] * NODE_XI1[n]
+            y += phi[p0, n] * NODE_XI2[n]
+        f[r, IP_PSI] = 1.0
+        f[r, IP_PSI + 1] = x
+        f[r, IP_PSI + 2] = y
+        f[r, IP_PSI + 3] = x * x
+        f[r, IP_PSI + 4] = x * y
+        f[r, IP_PSI + 5] = y * y
+        om = 0.0
+        for p in range(p0, p1):
+            om += w[p]
+        f[r, IP_OM] = om
+        for c in range(NC):
+            f[r, IP_M + c] = 0.0
+        f[r, IP_P0] = p0
+        f[r, IP_P1] = p1
+        for p in range(p0, p1):
+            _deformation(fl, zeta[p], hh, a0inv, p, f)
+            row = F_PT + p
+            for i in range(3):
+                for j in range(3):
+                    f[row, PT_F + 3 * i + j] = f[i, j]
+            e00 = 0.5 * (f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0] - 1.0)
+            e11 = 0.5 * (f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1] - 1.0)
+            e22 = 0.5 * (f[0, 2] * f[0, 2] + f[1, 2] * f[1, 2] + f[2, 2] * f[2, 2] - 1.0)
+            e01 = 0.5 * (f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1])
+            e02 = 0.5 * (f[0, 0] * f[0, 2] + f[1, 0] * f[1, 2] + f[2, 0] * f[2, 2])
+            e12 = 0.5 * (f[0, 1] * f[0, 2] + f[1, 1] * f[1, 2] + f[2, 1] * f[2, 2])
+            f[row, PT_E] = e00
+            f[row, PT_E + 1] = e11
+            f[row, PT_E + 2] = e22
+            f[row, PT_E + 3] = e01
+            f[row, PT_E + 4] = e02
+            f[row, PT_E + 5] = e12
+            # A⁰ from (A⁰)⁻¹ (cofactors): Ê = A⁰ᵀ E A⁰ needs it.
+            m00 = a0inv[p, 0, 0]; m01 = a0inv[p, 0, 1]; m02 = a0inv[p, 0, 2]
+            m10 = a0inv[p, 1, 0]; m11 = a0inv[p, 1, 1]; m12 = a0inv[p, 1, 2]
+            m20 = a0inv[p, 2, 0]; m21 = a0inv[p, 2, 1]; m22 = a0inv[p, 2, 2]
+            k00 = m11 * m22 - m12 * m21
+            k01 = m02 * m21 - m01 * m22
+            k02 = m01 * m12 - m02 * m11
+            det = m00 * k00 + m10 * k01 + m20 * k02
+            inv = 1.0 / det
+            a = PT_A
+            f[row, a] = k00 * inv
+            f[row, a + 1] = k01 * inv
+            f[row, a + 2] = k02 * inv
+            f[row, a + 3] = (m12 * m20 - m10 * m22) * inv
+            f[row, a + 4] = (m00 * m22 - m02 * m20) * inv
+            f[row, a + 5] = (m02 * m10 - m00 * m12) * inv
+            f[row, a + 6] = (m10 * m21 - m11 * m20) * inv
+            f[row, a + 7] = (m01 * m20 - m00 * m21) * inv
+            f[row, a + 8] = (m00 * m11 - m01 * m10) * inv
+            wm = w[p] / om
+            for c in range(NC):
+                ca = COMP_A[c]
+                cb_ = COMP_B[c]
+                # Ê_ab = A⁰_{ia} E_ij A⁰_{jb}
+                b0 = f[row, a + cb_]
+                b1 = f[row, a + 3 + cb_]
+                b2 = f[row, a + 6 + cb_]
+                eb0 = e00 * b0 + e01 * b1 + e02 * b2
+                eb1 = e01 * b0 + e11 * b1 + e12 * b2
+                eb2 = e02 * b0 + e12 * b1 + e22 * b2
+                f[r, IP_M + c] += wm * (f[row, a + ca] * eb0 + f[row, a + 3 + ca] * eb1 + f[row, a + 6 + ca] * eb2)
+        nip += 1
+        p0 = p1
+    return nip
+
+
+@njit(cache=True)
+def _invert_grams(f, bmat, nip):
+    """Gram matrices Σ Ω ψ_k ψ_l of P1 (3 × 3) and P2 (6 × 6) over the in-plane points, inverted in
+    place (Gauss–Jordan without pivoting: symmetric positive definite) into rows B_MI1, B_MI2."""
+    for k in range(NM_S):
+        for l in range(NM_S):
+            g = 0.0
+            for i in range(nip):
+                r = F_IP + i
+                g += f[r, IP_OM] * f[r, IP_PSI + k] * f[r, IP_PSI + l]
+            bmat[B_MI2 + k, l] = g
+            if k < NM_M and l < NM_M:
+                bmat[B_MI1 + k, l] = g
+    for r0, n in ((B_MI1, NM_M), (B_MI2, NM_S)):
+        for k in range(n):
+            piv = 1.0 / bmat[r0 + k, k]
+            bmat[r0 + k, k] = 1.0
+            for l in range(n):
+                bmat[r0 + k, l] *= piv
+            for i in range(n):
+                if i == k:
+                    continue
+                fac = bmat[r0 + i, k]
+                bmat[r0 + i, k] = 0.0
+                for l in range(n):
+                    bmat[r0 + i, l] -= fac * bmat[r0 + k, l]
+
+
+@njit(cache=True)
+def _l2(f, bmat, nip, gm, gs, adjoint):
+    """The corrections of the projection over the in-plane points, component by component: D =
+    γ (Πm − m) from the means m (``adjoint`` False), or its adjoint U = γ (Πᵀ T − T) from the thickness
+    sums T of the conjugate stresses (``adjoint`` True). Π = Ψ M⁻¹ Ψᵀ Ω (P1 for the membrane, P2 for
+    the shear components); γ = ``gm``, ``gs``."""
+    src = IP_T if adjoint else IP_M
+    dst = IP_U if adjoint else IP_D
+    for c in range(NC):
+        nm = NM_M if c < 3 else NM_S
+        r0 = B_MI1 if c < 3 else B_MI2
+        g = gm if c < 3 else gs
+        # rhs_k = Σ ψ_k x (× Ω unless adjoint) into f[3], β = M⁻¹ rhs into f[4].
+        for k in range(nm):
+            t = 0.0
+            for i in range(nip):
+                r = F_IP + i
+                wt = 1.0 if adjoint else f[r, IP_OM]
+                t += wt * f[r, IP_PSI + k] * f[r, src + c]
+            f[3, k] = t
+        for k in range(nm):
+            t = 0.0
+            for l in range(nm):
+                t += bmat[r0 + k, l] * f[3, l]
+            f[4, k] = t
+        for i in range(nip):
+            r = F_IP + i
+            t = 0.0
+            for k in range(nm):
+                t += f[r, IP_PSI + k] * f[4, k]
+            if adjoint:
+                t *= f[r, IP_OM]
+            f[r, dst + c] = g * (t - f[r, src + c])
+
+
+@njit(cache=True)
+def _stresses(a0inv, w, lam_l, mu, f, nip):
+    """Pass 2: E* = E + (A⁰)⁻ᵀ ΔÊ(D) (A⁰)⁻¹ at every point, its SVK stress S* (into the point's row)
+    and, per in-plane point, T = Σ w Ŝ* of the conjugate covariant stresses (Ŝ = (A⁰)⁻¹ S (A⁰)⁻ᵀ,
+    off-diagonal components twice). Returns the strain energy Σ ½ w S* : E* (J)."""
+    energy = 0.0
+    for i in range(nip):
+        r = F_IP + i
+        d0 = f[r, IP_D]; d1 = f[r, IP_D + 1]; d2 = f[r, IP_D + 2]; d3 = f[r, IP_D + 3]; d4 = f[r, IP_D + 4]
+        t0 = 0.0; t1 = 0.0; t2 = 0.0; t3 = 0.0; t4 = 0.0
+        for p in range(int(f[r, IP_P0]), int(f[r, IP_P1])):
+            row = F_PT + p
+            # ΔE_ij = Σ_ab a_ai ΔÊ_ab a_bj with a = (A⁰)⁻¹ (rows a_0, a_1, a_2), ΔÊ from d (symmetric).
+            x00 = a0inv[p, 0, 0]; x01 = a0inv[p, 0, 1]; x02 = a0inv[p, 0, 2]
+            x10 = a0inv[p, 1, 0]; x11 = a0inv[p, 1, 1]; x12 = a0inv[p, 1, 2]
+            x20 = a0inv[p, 2, 0]; x21 = a0inv[p, 2, 1]; x22 = a0inv[p, 2, 2]
+            # u_i = d0 a_0i + d2 a_1i + d3 a_2i (row 0 of ΔÊ times a), v_i = d2 a_0i + d1 a_1i + d4 a_2i (row 1),
+            # z_i = d3 a_0i + d4 a_1i (row 2); ΔE_ij = a_0i u_j + a_1i v_j + a_2i z_j.
+            u0 = d0 * x00 + d2 * x10 + d3 * x20; u1 = d0 * x01 + d2 * x11 + d3 * x21; u2 = d0 * x02 + d2 * x12 + d3 * x22
+            v0 = d2 * x00 + d1 * x10 + d4 * x20; v1 = d2 * x01 + d1 * x11 + d4 * x21; v2 = d2 * x02 + d1 * x12 + d4 * x22
+            z0 = d3 * x00 + d4 * x10; z1 = d3 * x01 + d4 * x11; z2 = d3 * x02 + d4 * x12
+            e00 = f[row, PT_E] + (x00 * u0 + x10 * v0 + x20 * z0)
+            e11 = f[row, PT_E + 1] + (x01 * u1 + x11 * v1 + x21 * z1)
+            e22 = f[row, PT_E + 2] + (x02 * u2 + x12 * v2 + x22 * z2)
+            e01 = f[row, PT_E + 3] + (x00 * u1 + x10 * v1 + x20 * z1)
+            e02 = f[row, PT_E + 4] + (x00 * u2 + x10 * v2 + x20 * z2)
+            e12 = f[row, PT_E + 5] + (x01 * u2 + x11 * v2 + x21 * z2)
+            tr = e00 + e11 + e22
+            s00 = lam_l * tr + 2.0 * mu * e00
+            s11 = lam_l * tr + 2.0 * mu * e11
+            s22 = lam_l * tr + 2.0 * mu * e22
+            s01 = 2.0 * mu * e01
+            s02 = 2.0 * mu * e02
+            s12 = 2.0 * mu * e12
+            wp = w[p]
+            energy += 0.5 * wp * (s00 * e00 + s11 * e11 + s22 * e22 + 2.0 * (s01 * e01 + s02 * e02 + s12 * e12))
+            f[row, PT_S] = s00
+            f[row, PT_S + 1] = s11
+            f[row, PT_S + 2] = s22
+            f[row, PT_S + 3] = s01
+            f[row, PT_S + 4] = s02
+            f[row, PT_S + 5] = s12
+            # S a_k for k = 0, 1, 2, then Ŝ_ab = a_a · S a_b.
+            p00 = s00 * x00 + s01 * x01 + s02 * x02; p01 = s01 * x00 + s11 * x01 + s12 * x02
+            p02 = s02 * x00 + s12 * x01 + s22 * x02
+            p10 = s00 * x10 + s01 * x11 + s02 * x12; p11 = s01 * x10 + s11 * x11 + s12 * x12
+            p12 = s02 * x10 + s12 * x11 + s22 * x12
+            t0 += wp * (x00 * p00 + x01 * p01 + x02 * p02)
+            t1 += wp * (x10 * p10 + x11 * p11 + x12 * p12)
+            t2 += 2.0 * wp * (x00 * p10 + x01 * p11 + x02 * p12)
+            t3 += 2.0 * wp * (x20 * p00 + x21 * p01 + x22 * p02)
+            t4 += 2.0 * wp * (x20 * p10 + x21 * p11 + x22 * p12)
+        f[r, IP_T] = t0
+        f[r, IP_T + 1] = t1
+        f[r, IP_T + 2] = t2
+        f[r, IP_T + 3] = t3
+        f[r, IP_T + 4] = t4
+    return energy
+
+
+@njit(cache=True)
+def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
+    """At one point: L (Voigt ΔE of each ΔÊ component) and R (the Ê components of a Voigt E), then
+    Mv += (w/Ω) R B, Z += Lᵀ (w C B) and Q += w Lᵀ C L (the B and w C B rows of the point already
+    in ``bmat`` and ``cb``)."""
+    vi = (0, 1, 2, 0, 0, 1)
+    vj = (0, 1, 2, 1, 2, 2)
+    for c in range(NC):
+        ca = COMP_A[c]
+        cb_ = COMP_B[c]
+        for vo in range(6):
+            i = vi[vo]
+            j = vj[vo]
+            x = a0inv[p, ca, i] * a0inv[p, cb_, j]
+            if ca != cb_:
+                x += a0inv[p, cb_, i] * a0inv[p, ca, j]
+            if vo >= 3:
+                x *= 2.0
+            bmat[B_LV + vo, c] = x
+            aia = f[row, PT_A + 3 * i + ca]
+            ajb = f[row, PT_A + 3 * j + cb_]
+            if vo < 3:
+                bmat[B_RV + c, vo] = aia * ajb
+            else:
+                bmat[B_RV + c, vo] = 0.5 * (aia * ajb + f[row, PT_A + 3 * j + ca] * f[row, PT_A + 3 * i + cb_])
+    wm = wp / om
+    for c in range(NC):
+        for v in range(3, NV):
+            m = 0.0
+            z = 0.0
+            for vo in range(6):
+                m += bmat[B_RV + c, vo] * bmat[vo, v]
+                z += bmat[B_LV + vo, c] * cb[vo, v]
+            bmat[B_MV + c, v] += wm * m
+            bmat[B_Z + c, v] += z
+    for c in range(NC):
+        l0 = bmat[B_LV, c]
+        l1 = bmat[B_LV + 1, c]
+        l2 = bmat[B_LV + 2, c]
+        tr = lam_l * (l0 + l1 + l2)
+        cl0 = tr + 2.0 * mu * l0
+        cl1 = tr + 2.0 * mu * l1
+        cl2 = tr + 2.0 * mu * l2
+        cl3 = mu * bmat[B_LV + 3, c]
+        cl4 = mu * bmat[B_LV + 4, c]
+        cl5 = mu * bmat[B_LV + 5, c]
+        for c2 in range(NC):
+            bmat[B_Q + c, c2] += wp * (cl0 * bmat[B_LV, c2] + cl1 * bmat[B_LV + 1, c2] + cl2 * bmat[B_LV + 2, c2]
+                                       + cl3 * bmat[B_LV + 3, c2] + cl4 * bmat[B_LV + 4, c2]
+                                       + cl5 * bmat[B_LV + 5, c2])
+
+
+@njit(cache=True)
+def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
+    """The projection's tangent parts of one in-plane point (its Mv, Z, Q summed over the thickness):
+    H += −Zᵀ γMv − (γMv)ᵀ Y (upper triangle; Y = Z − Q γ Mv), and for the rank-21 update the rows
+    ∂c += γ Ω (M⁻¹ψ)_k Mv S, W += ψ_k Y S and G += ψ_k ψ_k' Q of the active classes (γ ≠ 0)."""
+    for c in range(NC):
+        g = gm if c < 3 else gs
+        for v in range(3, NV):
+            t = bmat[B_Z + c, v]
+            for c2 in range(NC):
+                g2 = gm if c2 < 3 else gs
+                t -= bmat[B_Q + c, c2] * g2 * bmat[B_MV + c2, v]
+            bmat[B_Y + c, v] = t
+    for v in range(3, NV):
+        for v2 in range(v, NV):
+            t = 0.0
+            for c in range(NC):
+                g = gm if c < 3 else gs
+                t += g * (bmat[B_Z + c, v] * bmat[B_MV + c, v2] + bmat[B_MV + c, v] * bmat[B_Y + c, v2])
+            bmat[B_H + v, v2] -= t
+    # Mv S and Y S (5 × 70): (X S)_c[7n + ν] = Σ_b X[c, 7b + ν] s_n[b].
+    for n in range(NODES):
+        ph = phi[p0, n]
+        s1 = dphi[p0, n, 0]
+        s2 = dphi[p0, n, 1]
+        for nu in range(NDOF_NODE):
+            col = NDOF_NODE * n + nu
+            for c in range(NC):
+                cb[C_MS + c, col] = (ph * bmat[B_MV + c, nu] + s1 * bmat[B_MV + c, NDOF_NODE + nu]
+                                     + s2 * bmat[B_MV + c, 2 * NDOF_NODE + nu])
+                cb[C_YS + c, col] = (ph * bmat[B_Y + c, nu] + s1 * bmat[B_Y + c, NDOF_NODE + nu]
+                                     + s2 * bmat[B_Y + c, 2 * NDOF_NODE + nu])
+    om = f[r_ip, IP_OM]
+    for c in range(NC):
+        g = gm if c < 3 else gs
+        if g == 0.0:
+            continue
+        nm = NM_M if c < 3 else NM_S
+        r0 = 3 * c if c < 3 else 9 + NM_S * (c - 3)
+        mi = B_MI1 if c < 3 else B_MI2
+        for k in range(nm):
+            alpha = 0.0
+            for l in range(nm):
+                alpha += bmat[mi + k, l] * f[r_ip, IP_PSI + l]
+            alpha *= g * om
+            psi = f[r_ip, IP_PSI + k]
+            r = r0 + k
+            for col in range(NLOC):
+                cb[C_CM + r, col] += alpha * cb[C_MS + c, col]
+                cb[C_W + r, col] += psi * cb[C_YS + c, col]
+            for c2 in range(NC):
+                g2 = gm if c2 < 3 else gs
+                if g2 == 0.0:
+                    continue
+                nm2 = NM_M if c2 < 3 else NM_S
+                r02 = 3 * c2 if c2 < 3 else 9 + NM_S * (c2 - 3)
+                q = psi * bmat[B_Q + c, c2]
+                for k2 in range(nm2):
+                    bmat[B_G + r, r02 + k2] += q * f[r_ip, IP_PSI + k2]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _coupled_update(cb, bmat, ke, gm, gs):
+    """Upper triangle of K_e += ∂cᵀ V + Vᵀ ∂c with V = W + ½ G ∂c over the active projected
+    coefficients (membrane rows 0–8 when γ_m ≠ 0, shear rows 9–20 when γ_s ≠ 0): the material
+    stiffness that couples the in-plane points through the projection."""
+    lo = 0 if gm != 0.0 else 3 * NM_M
+    hi = NMODE if gs != 0.0 else 3 * NM_M
+    for r in range(lo, hi):
+        for r2 in range(lo, hi):
+            g = 0.5 * bmat[B_G + r, r2]
+            for col in range(NLOC):
+                cb[C_W + r, col] += g * cb[C_CM + r2, col]
+    for r in range(lo, hi):
+        for row in range(NLOC):
+            a = cb[C_CM + r, row]
+            b = cb[C_W + r, row]
+            for col in range(row, NLOC):
+                ke[row, col] += a * cb[C_W + r, col] + b * cb[C_CM + r, col]
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -176,7 +590,7 @@ def _spread_batch(cb, ke):
 
 @njit(cache=True)
 def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, cb, re, ke):
-    """Residual, tangent and strain energy of one positional shell element.
+    """Residual, tangent and strain energy of one positional shell element (assumed strains E*).
 
     Parameters
     ----------
@@ -186,15 +600,17 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
     zeta : (npt,) float64 — thickness coordinate ζ ∈ [−1, 1] of each point.
     a0inv : (npt, 3, 3) float64 — (A⁰)⁻¹ of the reference map per point (1/m, 1/m, 1/m rows).
     w : (npt,) float64 — reference volume weights W·det A⁰ (m³).
-    mat : (3,) float64 — Lamé λ, μ (Pa) and the half thickness h = h0/2 (m).
+    mat : (5,) float64 — Lamé λ, μ (Pa), the half thickness h = h0/2 (m) and the correction
+        weights γ_m = 1 − s (membrane) and γ_s (transverse shear) of the assumed strains (–).
     want_k : bool — also compute the tangent.
-    dv, dfa, f, bmat, cb : scratch of :func:`shell_scratch` (row roles: ``D_*``, ``F_*``, ``B_H``, ``C_*``).
+    dv, dfa, f, bmat, cb : scratch of :func:`shell_scratch` (row roles: ``D_*``, ``F_*``/``PT_*``/
+        ``IP_*``, ``B_*``, ``C_*``).
     re : (70,) out — internal force ∂U/∂q_e (N for Y, N·m for G and a).
     ke : (70, 70) out — tangent ∂²U/∂q_e² (symmetric; written only if ``want_k``).
 
     Returns
     -------
-    float — strain energy U (J).
+    float — strain energy U = Σ ½ w S* : E* (J).
 
     Notes
     -----
@@ -202,36 +618,51 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
     s_ℓ = (φℓ, φℓ,1, φℓ,2) and 21 "virtual" unknowns v = 7b + ν whose ∂F depend on the point but not
     on the node (Y_i: e_i ⊗ d_k with d = a⁰₀, a⁰₁ for b = 1, 2; G_i: e_i ⊗ d_k with the G columns of
     ∂A¹; a: the g, g,1, g,2 terms; a⁰_c the rows of (A⁰)⁻¹). The points through the thickness at one
-    in-plane point (consecutive rows of ``phi``/``dphi`` equal) share s_ℓ, so their contributions are
-    summed over the 21 virtual unknowns first and spread over the 70 once: r_e += Sᵀ r_v and
-    K_e += Sᵀ H S (21 × 21 H; T = H S, then Sᵀ T for NB in-plane points in one pass over K_e). r_v
-    only needs the thickness moments Σ N, Σ ζN, Σ ζ²N of N = w P (A⁰)⁻ᵀ. Same integrand, same rule
-    and F, E, S rounded as in the per-node sum; r_e and K_e differ from it by summation order only
-    (≤ 1e-14 relative, ``docs/benchmarks/shell_kernel.md``).
+    in-plane point share s_ℓ, so their contributions are summed over the 21 virtual unknowns first
+    and spread over the 70 once: r_e += Sᵀ r_v and K_e += Sᵀ H S (21 × 21 H; T = H S, then Sᵀ T for
+    NB in-plane points in one pass over K_e). r_v only needs the thickness moments Σ N, Σ ζN, Σ ζ²N
+    of N = w P (A⁰)⁻ᵀ, P = F S_eff.
+
+    Assumed strains (module docstring): with E* = E + L(D), D = γ(Πm − m) of the thickness means m
+    of the projected covariant components, U = Σ ½ w S* : E*. Its residual is the raw kernel's with
+    the effective stress S_eff = S* + ΔS, ΔS = A⁰ Ũ A⁰ᵀ / Ω (Ũ the adjoint U = γ(ΠᵀT − T) of the
+    stress sums T = Σ w Ŝ*), and so is the tangent's geometric part. Its material part is
+    Σ w B*ᵀ C B* with B* = B + L ∂D, ∂D = N − γ Mv S (N = Σ_k ψ_k ∂c_k the projected part): the terms
+    within one in-plane point go into H, the ones through N into a rank-21 update ∂cᵀ V + Vᵀ ∂c
+    (:func:`_assumed_in_plane`, :func:`_coupled_update`).
     """
-    npt = w.shape[0]
     lam_l = mat[SMAT_LAMBDA]
     mu = mat[SMAT_MU]
     hh = mat[SMAT_H]
+    gm = mat[SMAT_GM]
+    gs = mat[SMAT_GS]
     re[:] = 0.0
     if want_k:
         ke[:, :] = 0.0
-    energy = 0.0
+        for r in range(C_CM, C_MS):
+            for c in range(NLOC):
+                cb[r, c] = 0.0
+        for r in range(B_G, B_G + NMODE):
+            for c in range(NV):
+                bmat[r, c] = 0.0
+    # Passes 1 and 2: strains, their projection, the stresses of E* and the adjoint projection.
+    nip = _strains(qe, phi, dphi, zeta, a0inv, w, hh, f)
+    _invert_grams(f, bmat, nip)
+    _l2(f, bmat, nip, gm, gs, nip < 0)
+    energy = _stresses(a0inv, w, lam_l, mu, f, nip)
+    _l2(f, bmat, nip, gm, gs, nip >= 0)
     ns = 0              # filled slots of the tangent batch
-    p0 = npt * 0         # an int64 from data: a literal 0 would compile a second signature of _fields
-    while p0 < npt:
-        # The run p0 … p1−1 of points through the thickness at one in-plane point.
-        p1 = p0 + 1
-        while p1 < npt:
-            same = True
-            for n in range(NODES):
-                if (phi[p1, n] != phi[p0, n] or dphi[p1, n, 0] != dphi[p0, n, 0]
-                        or dphi[p1, n, 1] != dphi[p0, n, 1]):
-                    same = False
-                    break
-            if not same:
-                break
-            p1 += 1
+    for ip in range(nip):
+        r_ip = F_IP + ip
+        p0 = int(f[r_ip, IP_P0])
+        p1 = int(f[r_ip, IP_P1])
+        om = f[r_ip, IP_OM]
+        # Ũ / Ω as a symmetric 3 × 3 (ΔS = A⁰ Ũ A⁰ᵀ / Ω).
+        u00 = f[r_ip, IP_U] / om
+        u11 = f[r_ip, IP_U + 1] / om
+        u01 = 0.5 * f[r_ip, IP_U + 2] / om
+        u02 = 0.5 * f[r_ip, IP_U + 3] / om
+        u12 = 0.5 * f[r_ip, IP_U + 4] / om
         # Interpolated fields (independent of ζ): y,1 y,2; g g,1 g,2; a a,1 a,2.
         fl = _fields(qe, phi, dphi, p0)
         y1x, y1y, y1z, y2x, y2y, y2z, gx, gy, gz, g1x, g1y, g1z, g2x, g2y, g2z, aa, a1, a2 = fl
@@ -246,15 +677,38 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
             for v in range(3, NV):
                 for v2 in range(NV):
                     bmat[B_H + v, v2] = 0.0
+            for r in range(B_MV, B_Y):
+                for v in range(NV):
+                    bmat[r, v] = 0.0
+            for r in range(B_Q, B_Q + NC):
+                for c in range(NC):
+                    bmat[r, c] = 0.0
         for p in range(p0, p1):
+            row = F_PT + p
             z = zeta[p]
             z2 = z * z
             hz = hh * z
             hz2 = hh * z2
             s3 = hh * (1.0 + 2.0 * aa * z)
-            s00, s11, s22, s01, s02, s12, se = _strain_stress(fl, z, hh, a0inv, p, lam_l, mu, f)
+            for i in range(3):
+                for j in range(3):
+                    f[i, j] = f[row, PT_F + 3 * i + j]
+            # S_eff = S* + A⁰ Ũ A⁰ᵀ / Ω.
+            al00 = f[row, PT_A]; al01 = f[row, PT_A + 1]; al02 = f[row, PT_A + 2]
+            al10 = f[row, PT_A + 3]; al11 = f[row, PT_A + 4]; al12 = f[row, PT_A + 5]
+            al20 = f[row, PT_A + 6]; al21 = f[row, PT_A + 7]; al22 = f[row, PT_A + 8]
+            k00 = u00 * al00 + u01 * al01 + u02 * al02; k01 = u00 * al10 + u01 * al11 + u02 * al12
+            k02 = u00 * al20 + u01 * al21 + u02 * al22
+            k10 = u01 * al00 + u11 * al01 + u12 * al02; k11 = u01 * al10 + u11 * al11 + u12 * al12
+            k12 = u01 * al20 + u11 * al21 + u12 * al22
+            k20 = u02 * al00 + u12 * al01; k21 = u02 * al10 + u12 * al11; k22 = u02 * al20 + u12 * al21
+            s00 = f[row, PT_S] + (al00 * k00 + al01 * k10 + al02 * k20)
+            s11 = f[row, PT_S + 1] + (al10 * k01 + al11 * k11 + al12 * k21)
+            s22 = f[row, PT_S + 2] + (al20 * k02 + al21 * k12 + al22 * k22)
+            s01 = f[row, PT_S + 3] + (al00 * k01 + al01 * k11 + al02 * k21)
+            s02 = f[row, PT_S + 4] + (al00 * k02 + al01 * k12 + al02 * k22)
+            s12 = f[row, PT_S + 5] + (al10 * k02 + al11 * k12 + al12 * k22)
             wp = w[p]
-            energy += 0.5 * wp * se
             # w P = w F S, then N = w P (A⁰)⁻ᵀ and its thickness moments.
             for i in range(3):
                 fi0 = f[i, 0]
@@ -271,7 +725,6 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
                     f[F_NZ2 + i, c] += z2 * nic
             if not want_k:
                 continue
-
             # Virtual ∂F: Y, G (e_i ⊗ d_k, k = 3t + b) and a (dfa[b]).
             cg = hh * (z + z2 * aa)
             for j in range(3):
@@ -336,6 +789,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
                 cb[3, c] = wp * mu * bmat[3, c]
                 cb[4, c] = wp * mu * bmat[4, c]
                 cb[5, c] = wp * mu * bmat[5, c]
+            _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu)
             # Material part Bᵀ C B (upper triangle).
             for v in range(3, NV):
                 b0 = bmat[0, v]; b1 = bmat[1, v]; b2 = bmat[2, v]
@@ -417,6 +871,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
             for nu in range(NDOF_NODE):
                 re[b + nu] += ph * f[F_RV, nu] + s1 * f[F_RV + 1, nu] + s2 * f[F_RV + 2, nu]
         if want_k:
+            _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs)
             # K_e += Sᵀ H S: T = H S (21 × 70) into the batch slot, then (per NB slots) the upper triangle
             # of Sᵀ T. Rows v < 3 (Y·φ) are zero.
             for v in range(3, NV):
@@ -440,10 +895,10 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
             if ns == NB:
                 _spread_batch(cb, ke)
                 ns = 0
-        p0 = p1
     if want_k:
         for slot in range(ns):
             _spread_slot(cb, ke, slot)
+        _coupled_update(cb, bmat, ke, gm, gs)
     if want_k:
         for r in range(NLOC):
             for c in range(r + 1, NLOC):
@@ -451,12 +906,14 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
     return energy
 
 
+
+
 @njit(cache=True)
 def shell_group(q, edofs, phi, dphi, zeta, a0inv, w, mat, smap, want_k, r, kdata, dv, dfa, f, bmat, cb,
                 qe, re, ke):
     """Loop over one shell group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.
 
-    ``edofs (ne, 70)`` global DOF ids; ``a0inv (ne, npt, 3, 3)``, ``w (ne, npt)``, ``mat (ne, 3)``;
+    ``edofs (ne, 70)`` global DOF ids; ``a0inv (ne, npt, 3, 3)``, ``w (ne, npt)``, ``mat (ne, 5)``;
     ``smap (ne, 4900)`` CSR position of each local entry (−1: prescribed). Returns the strain energy (J).
     """
     energy = 0.0
@@ -476,8 +933,10 @@ def shell_scratch() -> tuple[np.ndarray, ...]:
     """Scratch buffers for :func:`shell_group` (allocated once per model): dv, dfa, f, bmat, cb, qe, re, ke.
 
     ``dv (20, 3)`` virtual d_k, w S d_k, g g,1 g,2 and N; ``dfa (10, 3, 3)`` virtual ∂F/∂a and
-    w ∂F/∂a S; ``f (15, 7)`` F, the thickness moments of N and r_v; ``bmat (27, 21)`` Voigt B and H;
-    ``cb (102, 70)`` w C B, the batch's T and s_ℓ; ``qe, re (70,)``; ``ke (70, 70)``.
+    w ∂F/∂a S; ``f (463, 30)`` F, the thickness moments of N and r_v, then per point F, E, A⁰, S* and
+    per in-plane point ψ, Ω, m, D, T, U (up to 8 × 8 × 6 points); ``bmat (88, 21)`` Voigt B, H and the
+    projection's Mv, Z, Y, G, Gram inverses, Q, L, R; ``cb (154, 70)`` w C B, the batch's T and s_ℓ,
+    ∂c, W, Mv S and Y S; ``qe, re (70,)``; ``ke (70, 70)``.
     """
-    return (np.zeros((2 * NODES, 3)), np.zeros((NODES, 3, 3)), np.zeros((N_F, NDOF_NODE)), np.zeros((B_H + NV, NV)),
-            np.zeros((C_S + 3 * NB, NLOC)), np.zeros(NLOC), np.zeros(NLOC), np.zeros((NLOC, NLOC)))
+    return (np.zeros((2 * NODES, 3)), np.zeros((NODES, 3, 3)), np.zeros((N_FROW, N_FCOL)), np.zeros((N_BROW, NV)),
+            np.zeros((N_CBROW, NLOC)), np.zeros(NLOC), np.zeros(NLOC), np.zeros((NLOC, NLOC)))

@@ -9,11 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..kernels.shell import N_SMAT, SMAT_H, SMAT_LAMBDA, SMAT_MU
+from ..kernels.shell import N_SMAT, SMAT_GM, SMAT_GS, SMAT_H, SMAT_LAMBDA, SMAT_MU
 from ..scene.schema import Scene, Shell
 from . import shell_mesh
 from .model import ShellGroup, ShellInfo
-from .shell_geometry import shell_element_geometry, shell_element_mass, shell_rule
+from .shell_geometry import membrane_weight, shell_element_geometry, shell_element_mass, shell_rule
 
 MASS_RULE = (4, 3)      # exact for the mass integrand (degree 6 in-plane, ζ⁴ through the thickness)
 
@@ -219,7 +219,11 @@ def build_shell_groups(scene: Scene, infos: tuple[ShellInfo, ...], scatter_map,
             b["edofs"].append(edofs)
             b["a0inv"].append(a0inv)
             b["w"].append(w)
-            b["mat"].append(row)
+            # assumed strains: the membrane part beyond P1 weighted by s, the shear projected on P2
+            row_e = row.copy()
+            row_e[SMAT_GM] = 1.0 - membrane_weight(x, v0, spec.thickness, dphi)
+            row_e[SMAT_GS] = 1.0
+            b["mat"].append(row_e)
             b["shell"].append(info.name)
             me = shell_element_mass(mass_rule[0], mass_rule[2], wm, mat.rho, hh)
             mass_rows.append(np.repeat(edofs, edofs.size))

@@ -52,9 +52,11 @@ def test_pinched_hemisphere_with_a_hole_converges_under_refinement():
         assert b[0] == 0.0                            # the symmetry edge x = 0 holds at B
         ua.append(a[0])
         ub.append(-b[1])
-    # measured (×1e-3, loads 0.01): A 0.5018, 0.8404, 0.9075 — errors 0.406, 0.067 against 8×8 (ratio 6.0)
-    _refines(ua, 4.0)
-    _refines(ub, 4.0)
+    # measured (×1e-3, loads 0.01), with the assumed strains: A 0.9316, 0.9369, 0.9364 — the steps shrink
+    # from 5.3e-6 m to 5.5e-7 m (ratio 9.7); before them (issue 16) 0.5018, 0.8404, 0.9075 (a locked 4×4).
+    # Against the 32×32 value: tests/verification/test_shell_locking.py
+    for u in (ua, ub):
+        assert abs(u[2] - u[1]) * 5.0 <= abs(u[1] - u[0]), u
     # the loads are antisymmetric under a quarter turn: in the linear range |u_A| = |u_B| up to the
     # mesh's diagonals (measured 1.1e-4)
     assert ua[-1] == pytest.approx(ub[-1], rel=1e-3)
@@ -69,7 +71,8 @@ def test_pinched_cylinder_octant_converges_under_refinement():
         c = np.array(out["C"])
         assert c[0] == 0.0 and c[1] == 0.0            # on the symmetry planes x = L/2 and y = 0
         w.append(-c[2])
-    # measured (×1e-5): 0.951, 1.47, 1.67 — errors 0.72, 0.20 against 8×8 (ratio 3.6; R/t = 100)
+    # measured (×1e-5), with the assumed strains: 1.564, 1.714, 1.780 — errors 0.216, 0.066 against 8×8
+    # (ratio 3.3; R/t = 100); before them (issue 16) 0.951, 1.47, 1.67
     _refines(w, 2.5)
     assert w[-1] > 0.0
 
@@ -80,7 +83,10 @@ def test_closed_tube_matches_the_octant_and_its_seam_is_joined():
     _, octant = _solve(DATA / "shell_pinched_cylinder_2.yaml")              # 2 × 2 per octant
     model, closed = _solve(DATA / "shell_pinched_cylinder_closed_4x8.yaml")  # 4 × 8 on the whole tube
     w_octant, w_closed = -octant["C"][2], -closed["C"][2]
-    assert w_closed == pytest.approx(w_octant, rel=5e-3)                    # measured 8e-4
+    # measured 1.5e-2 (8e-4 with the assumed-strain weights 0): on 2 × 2 cells per octant (45° per element)
+    # the assumed strains make the answer depend on the diagonals' directions, and the tube's quarters are
+    # the octant's mirror images
+    assert w_closed == pytest.approx(w_octant, rel=2.5e-2)
     assert closed["D"][2] == pytest.approx(w_closed, rel=1e-6)               # the two pinches agree
     info = model.shell("tube")
     assert "start" not in info.edges and len(np.unique(info.nodes)) == info.nodes.size
@@ -103,10 +109,12 @@ def test_open_cylinder_pulled_out_converges_under_refinement():
         ua.append(out["A"][2])
         ub.append(out["B"][2])
         uc.append(-out["C"][1])
-    # measured (×1e-3, P/4 = 1): A 3.183, 4.364, 4.507 — errors 1.32, 0.14 against 6×6 (ratio 9.3)
-    _refines(ua, 4.0)
-    _refines(ub, 4.0)
-    _refines(uc, 4.0)
+    # measured (×1e-3, P/4 = 1), with the assumed strains: A 4.386, 4.507, 4.534 — errors 0.148, 0.026 against
+    # 6×6 (ratio 5.6); B 4.2998, 4.3114, 4.3171 (ratio 3.0, 2×2 already within 0.4 %); before them (issue 16)
+    # A 3.183, 4.364, 4.507
+    _refines(ua, 2.5)
+    _refines(ub, 2.5)
+    _refines(uc, 2.5)
     assert ua[-1] > ub[-1] > 0.0 and uc[-1] > 0.0     # pulled out, the free end follows, the side pulls in
 
 
@@ -138,5 +146,7 @@ def test_cap_closed_at_the_pole_quarter_and_whole_agree():
     _, whole = _solve(DATA / "shell_cap_pole_load_full.yaml")           # 4 × 16 cells
     for key in ("pole", "mid"):
         q, w = np.array(quarter[key]["displacement"]), np.array(whole[key]["displacement"])
-        assert np.linalg.norm(w - q) <= 1e-5 * np.linalg.norm(q), (key, q, w)   # measured 1e-9, 3e-6
+        # measured 1e-9, 9e-5 (3e-6 before the assumed strains: their projection sees the two meshes' different
+        # diagonals)
+        assert np.linalg.norm(w - q) <= 3e-4 * np.linalg.norm(q), (key, q, w)
     assert quarter["pole"]["displacement"][2] < 0.0
