@@ -56,13 +56,24 @@ def _rss_mb(pid: int) -> float | None:
     return None
 
 
+def _tail(path: Path, chars: int = 2000) -> str:
+    text = path.read_text(errors="replace") if path.exists() else ""
+    return text[-chars:]
+
+
 def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tuple], dict]:
     """The demo run; returns [(s since start, node RSS MB, player RSS MB or None)] and its summary."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", ROS_DOMAIN_ID=str(random.SystemRandom().randint(1, 200)))
     env.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".cache" / "numba"))
+    # the node's log goes to a file: a pipe read only at the end fills after some minutes of
+    # warnings, and the node's publisher thread then blocks in the log write while the stepping
+    # thread queues events for it — the RSS growth of 7–9 MB/min measured in earlier soaks (a
+    # 2-hour run reached 1.5 GB with the publisher thread in pipe_write, 2026-11-24)
+    out.mkdir(parents=True, exist_ok=True)
+    log = open(out / "demo.log", "w")
     demo = subprocess.Popen([sys.executable, "-m", "flexmb.cli", "demo", scene, "--mode", "realtime", "--until",
                              str(seconds), "--out", str(out)], env=env, cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=log, text=True)
     t0 = time.monotonic()
     node = None
     while node is None and demo.poll() is None and time.monotonic() - t0 < 120:
@@ -70,7 +81,7 @@ def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tupl
         time.sleep(0.2)
     if node is None:
         demo.kill()
-        raise RuntimeError(f"the node process of the demo was not found: {demo.stderr.read()[-2000:]}")
+        raise RuntimeError(f"the node process of the demo was not found: {_tail(out / 'demo.log')}")
     series, player = [], None
     while demo.poll() is None:
         player = player or next((p for p in _children(demo.pid) if " play " in _cmdline(p)), None)
@@ -78,9 +89,10 @@ def soak(scene: str, seconds: float, every: float, out: Path) -> tuple[list[tupl
         if rss is not None:
             series.append((time.monotonic() - t0, rss, _rss_mb(player) if player else None))
         time.sleep(every)
-    _, err = demo.communicate()
+    demo.wait()
+    log.close()
     if demo.returncode != 0:
-        raise RuntimeError(f"the demo failed ({demo.returncode}): {err[-2000:]}")
+        raise RuntimeError(f"the demo failed ({demo.returncode}): {_tail(out / 'demo.log')}")
     summary = json.loads((out / "summary.json").read_text())
     return series, summary
 
