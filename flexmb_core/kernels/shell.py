@@ -399,13 +399,15 @@ def _stresses(a0inv, w, lam_l, mu, f, nip):
 
 
 @njit(cache=True)
-def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
+def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu, gm):
     """At one point: L (Voigt ΔE of each ΔÊ component) and R (the Ê components of a Voigt E), then
     Mv += (w/Ω) R B, Z += Lᵀ (w C B) and Q += w Lᵀ C L (the B and w C B rows of the point already
-    in ``bmat`` and ``cb``)."""
+    in ``bmat`` and ``cb``). The membrane components only when γ_m ≠ 0 (a flat element has γ_m = 0:
+    they would be multiplied by 0)."""
+    c0 = 0 if gm != 0.0 else 3
     vi = (0, 1, 2, 0, 0, 1)
     vj = (0, 1, 2, 1, 2, 2)
-    for c in range(NC):
+    for c in range(c0, NC):
         ca = COMP_A[c]
         cb_ = COMP_B[c]
         for vo in range(6):
@@ -424,7 +426,7 @@ def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
             else:
                 bmat[B_RV + c, vo] = 0.5 * (aia * ajb + f[row, PT_A + 3 * j + ca] * f[row, PT_A + 3 * i + cb_])
     wm = wp / om
-    for c in range(NC):
+    for c in range(c0, NC):
         for v in range(3, NV):
             m = 0.0
             z = 0.0
@@ -433,7 +435,7 @@ def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
                 z += bmat[B_LV + vo, c] * cb[vo, v]
             bmat[B_MV + c, v] += wm * m
             bmat[B_Z + c, v] += z
-    for c in range(NC):
+    for c in range(c0, NC):
         l0 = bmat[B_LV, c]
         l1 = bmat[B_LV + 1, c]
         l2 = bmat[B_LV + 2, c]
@@ -444,7 +446,7 @@ def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
         cl3 = mu * bmat[B_LV + 3, c]
         cl4 = mu * bmat[B_LV + 4, c]
         cl5 = mu * bmat[B_LV + 5, c]
-        for c2 in range(NC):
+        for c2 in range(c0, NC):
             bmat[B_Q + c, c2] += wp * (cl0 * bmat[B_LV, c2] + cl1 * bmat[B_LV + 1, c2] + cl2 * bmat[B_LV + 2, c2]
                                        + cl3 * bmat[B_LV + 3, c2] + cl4 * bmat[B_LV + 4, c2]
                                        + cl5 * bmat[B_LV + 5, c2])
@@ -454,19 +456,21 @@ def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu):
 def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
     """The projection's tangent parts of one in-plane point (its Mv, Z, Q summed over the thickness):
     H += −Zᵀ γMv − (γMv)ᵀ Y (upper triangle; Y = Z − Q γ Mv), and for the rank-21 update the rows
-    ∂c += γ Ω (M⁻¹ψ)_k Mv S, W += ψ_k Y S and G += ψ_k ψ_k' Q of the active classes (γ ≠ 0)."""
-    for c in range(NC):
+    ∂c += γ Ω (M⁻¹ψ)_k Mv S, W += ψ_k Y S and G += ψ_k ψ_k' Q of the active classes (γ ≠ 0; the
+    membrane components are skipped when γ_m = 0)."""
+    c0 = 0 if gm != 0.0 else 3
+    for c in range(c0, NC):
         g = gm if c < 3 else gs
         for v in range(3, NV):
             t = bmat[B_Z + c, v]
-            for c2 in range(NC):
+            for c2 in range(c0, NC):
                 g2 = gm if c2 < 3 else gs
                 t -= bmat[B_Q + c, c2] * g2 * bmat[B_MV + c2, v]
             bmat[B_Y + c, v] = t
     for v in range(3, NV):
         for v2 in range(v, NV):
             t = 0.0
-            for c in range(NC):
+            for c in range(c0, NC):
                 g = gm if c < 3 else gs
                 t += g * (bmat[B_Z + c, v] * bmat[B_MV + c, v2] + bmat[B_MV + c, v] * bmat[B_Y + c, v2])
             bmat[B_H + v, v2] -= t
@@ -477,13 +481,13 @@ def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
         s2 = dphi[p0, n, 1]
         for nu in range(NDOF_NODE):
             col = NDOF_NODE * n + nu
-            for c in range(NC):
+            for c in range(c0, NC):
                 cb[C_MS + c, col] = (ph * bmat[B_MV + c, nu] + s1 * bmat[B_MV + c, NDOF_NODE + nu]
                                      + s2 * bmat[B_MV + c, 2 * NDOF_NODE + nu])
                 cb[C_YS + c, col] = (ph * bmat[B_Y + c, nu] + s1 * bmat[B_Y + c, NDOF_NODE + nu]
                                      + s2 * bmat[B_Y + c, 2 * NDOF_NODE + nu])
     om = f[r_ip, IP_OM]
-    for c in range(NC):
+    for c in range(c0, NC):
         g = gm if c < 3 else gs
         if g == 0.0:
             continue
@@ -500,7 +504,7 @@ def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
             for col in range(NLOC):
                 cb[C_CM + r, col] += alpha * cb[C_MS + c, col]
                 cb[C_W + r, col] += psi * cb[C_YS + c, col]
-            for c2 in range(NC):
+            for c2 in range(c0, NC):
                 g2 = gm if c2 < 3 else gs
                 if g2 == 0.0:
                     continue
@@ -789,7 +793,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
                 cb[3, c] = wp * mu * bmat[3, c]
                 cb[4, c] = wp * mu * bmat[4, c]
                 cb[5, c] = wp * mu * bmat[5, c]
-            _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu)
+            _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu, gm)
             # Material part Bᵀ C B (upper triangle).
             for v in range(3, NV):
                 b0 = bmat[0, v]; b1 = bmat[1, v]; b2 = bmat[2, v]
