@@ -19,7 +19,6 @@ unprojected element: E* = E). Writes docs/benchmarks/shell_locking.{md,json}.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import platform
@@ -33,8 +32,9 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from flexmb_core.kernels.shell import SMAT_GM, SMAT_GS  # noqa: E402
+from flexmb_core.kernels.shell import SMAT_GM  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
+from flexmb_core.model.shell_compile import without_assumed_strains  # noqa: E402
 from flexmb_core.scene.loader import scene_from_dict  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
 
@@ -48,18 +48,6 @@ CASES = {
 }
 
 
-def unprojected(model):
-    """The model with the assumed-strain correction weights of every shell element set to 0."""
-    groups = []
-    for g in model.shell_groups:
-        mat = g.mat.copy()
-        mat[:, SMAT_GM] = 0.0
-        mat[:, SMAT_GS] = 0.0
-        mat.setflags(write=False)
-        groups.append(dataclasses.replace(g, mat=mat))
-    return dataclasses.replace(model, shell_groups=tuple(groups))
-
-
 def run(case: str, n: int, remedy: bool) -> dict:
     path, shell, output, comp, sign, _ = CASES[case]
     data = {"include": {"file": str(path), "overrides": {f"shells.{shell}.mesh.divisions": [n, n]}},
@@ -68,7 +56,7 @@ def run(case: str, n: int, remedy: bool) -> dict:
     # the composed scene's own (virtual) file: the include's absolute path is read as it is
     model = compile_scene(scene_from_dict(data, source=str(ROOT / "benchmarks" / f"{case}_{n}.yaml")))
     if not remedy:
-        model = unprojected(model)
+        model = without_assumed_strains(model)
     sim = Simulator(model)
     sim.initialize()
     sim.run(sim.spec.until)

@@ -3,6 +3,7 @@ edge supports and edge loads (called by :func:`flexmb_core.model.compile.compile
 
 from __future__ import annotations
 
+import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass
 
@@ -348,3 +349,17 @@ def shell_point_node(info: ShellInfo, at, where: str, edge: str | None = None) -
         raise SceneError(where, f"no node of shell '{info.name}' at {list(at)} (nearest {d[k]:.3g} m away, at "
                                 f"{np.round(info.x0[k], 6).tolist()})")
     return k
+
+
+def without_assumed_strains(model):
+    """A copy of the compiled ``model`` whose shell elements have both assumed-strain weights 0:
+    the unprojected element (the shell before issue 16's locking remedy), bit for bit — what the
+    locking benchmark and test compare the remedy against."""
+    groups = []
+    for g in model.shell_groups:
+        mat = g.mat.copy()
+        mat[:, SMAT_GM] = 0.0
+        mat[:, SMAT_GS] = 0.0
+        mat.setflags(write=False)
+        groups.append(dataclasses.replace(g, mat=mat))
+    return dataclasses.replace(model, shell_groups=tuple(groups))
