@@ -43,6 +43,8 @@ SIZE, NOT_FINITE, STROKE, UNKNOWN_NAME, DUPLICATE_NAME, STALE, OUT_OF_ORDER, FUT
     "size", "not_finite", "stroke", "unknown_name", "duplicate_name", "stale", "out_of_order", "future",
     "bad_trajectory")
 BAD_STAMP, RATE, TOO_LARGE = "bad_stamp", "rate", "too_large"
+# refused unapplied by the node: its publisher had stalled and could not have recorded the command
+PUBLISHER_STALLED = "publisher_stalled"
 
 HOLDS = ("smooth", "ramp", "step")
 MAX_HOLD_PERIOD = 0.5        # s: longest ramp (commands slower than this are still held over 0.5 s)

@@ -43,6 +43,7 @@ import numpy as np
 
 from flexmb_core.model.workspace import State
 
+from .commands import PUBLISHER_STALLED
 from .twin import TwinRunner, apply_message
 
 _PR_SET_TIMERSLACK = 29
@@ -138,6 +139,10 @@ class StepperConfig:
     cpu_affinity: tuple[int, ...] = ()
     rt_priority: int = -1
     window: int = 1000               # steps over which recent deadline misses are counted
+    # events the outbox may hold for the publisher (≈ 65 s of a 1 kHz twin answering every step):
+    # a publisher that stalls (a log sink that blocks, a disk that does not take the recording)
+    # must not make the stepping thread's queue, and the node's memory, grow without bound
+    outbox_limit: int = 1 << 16
 
 
 @dataclass
@@ -149,6 +154,12 @@ class StepperStats:
     deadline_misses: int = 0
     overruns: int = 0
     dropped_snapshots: int = 0       # publications the publisher fell too far behind to make
+    stalled_drops: int = 0           # publications and /clock events not queued: the outbox was full
+
+    @property
+    def dropped_publications(self) -> int:
+        """Publications never made: lapped in the ring, or not queued into a full outbox."""
+        return self.dropped_snapshots + self.stalled_drops
     recent_misses: int = 0           # deadline misses within the last ``window`` steps
 
 
@@ -355,6 +366,12 @@ class Stepper:
         and None is returned."""
         snap = None
         with self._lock:
+            if len(self.outbox) >= self.cfg.outbox_limit:
+                # the publisher has stalled: a command applied now could not be recorded, so it is
+                # refused unapplied (counted; the node reports it once the publisher runs again)
+                rejections = self.runner.counters.rejections
+                rejections[PUBLISHER_STALLED] = rejections.get(PUBLISHER_STALLED, 0) + 1
+                return None
             t_applied = self.runner.t
             try:
                 rejection = apply_message(self.runner, kind, topic, msg)
@@ -497,11 +514,18 @@ class Stepper:
                                   ack, answered and on_command)
             if on_command:
                 self._new_command = False
-        if cfg.clock_every and (k % cfg.clock_every == 0 or not outcome.advanced):
+        if cfg.clock_every and (k % cfg.clock_every == 0 or not outcome.advanced) and self._room():
             self.outbox.append(("clock", runner.t))
             if snap is None or not answered:       # an answering caller notifies once it is done
                 self._notify()
         return b, snap
+
+    def _room(self) -> bool:
+        """Whether the outbox takes one more state event; counts the one it cannot take."""
+        if len(self.outbox) < self.cfg.outbox_limit:
+            return True
+        self.stats.stalled_drops += 1
+        return False
 
     def _snapshot(self, result, advanced, message, wall, late, due, shape_due, on_command, ack,
                   answered: bool = False) -> Snapshot:
@@ -518,7 +542,8 @@ class Stepper:
         c = runner.counters
         s.steps, s.failed_steps, s.flagged_steps = c.steps, c.failed_steps, c.flagged_steps
         s.rejected, s.newest_stamp = runner.rejected_commands, runner.newest_command_stamp
-        self.outbox.append(("out", i, self._seq))
+        if self._room():
+            self.outbox.append(("out", i, self._seq))
         self._seq += 1
         if not answered:        # the answering thread notifies once it is done (submit)
             self._notify()

@@ -54,6 +54,7 @@ from flexmb_io.twin import RunnerOptions, TwinRunner
 from flexmb_io.wire import serialize
 
 from .convert import message_class, to_dict
+from .logsink import DeferredLogger
 from .params import SPECS, NodeParams
 from .taking import TAKE_MAX, take_waiting
 
@@ -105,7 +106,8 @@ class TwinNode:
         self._rclpy = rclpy
         self.context = context
         self.node = _managed_node(self, node_name, context)
-        self.log = self.node.get_logger()
+        # written by a thread of its own: a stderr nobody reads must not stall the publisher
+        self.log = DeferredLogger(self.node.get_logger())
         self.node_name = self.node.get_name()
         self.namespace = self.node.get_namespace()
         self.fq_name = self.node.get_fully_qualified_name()
@@ -660,8 +662,8 @@ class TwinNode:
                    f"deadline ({st.deadline_misses} in total, {st.overruns} re-anchored); step wall time p99 "
                    f"{1e3 * self.stepper.step_walls.percentiles((99,), last=window)['p99']:.3f} ms for Δt = "
                    f"{1e3 * self.dt:g} ms")
-        if st.dropped_snapshots:
-            msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_snapshots} publications "
+        if st.dropped_publications:
+            msg = (msg + "; " if msg else "") + (f"publisher behind: {st.dropped_publications} publications "
                                                  "dropped")
         rss = self._rss_now = _rss_mb()
         self._rss_max = max(self._rss_max, rss)
@@ -794,7 +796,7 @@ class TwinNode:
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
-            "dropped_publications": st.dropped_snapshots, "coalesced_publications": self._coalesced,
+            "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
             "deadline_slack_s": self.stepper.lateness.percentiles((1, 50), sign=-1.0),
             "command_to_state_latency_s": self._latencies.percentiles(),
@@ -806,6 +808,7 @@ class TwinNode:
             "cpu_time_s": self._cpu_times(wall),
             "rss_mb": {"start": self._rss_start, "max": self._rss_max, "end": _rss_mb()},
             "record": self.p.record, "rrd": self.p.rrd, "interrupted": self.interrupted,
+            "log_lines_dropped": self.log.dropped,
         }
 
     def _cpu_times(self, wall: float) -> dict:
@@ -817,6 +820,7 @@ class TwinNode:
 
     def close(self) -> None:
         self._teardown()
+        self.log.close()
         try:
             self.executor.remove_node(self.node)
         except Exception:
@@ -884,11 +888,11 @@ class Diagnostics:
                         ("residual", getattr(res, "residual", 0.0)), ("steps", c.steps),
                         ("failed_steps", c.failed_steps), ("flagged_steps", c.flagged_steps),
                         ("substepped_steps", c.substepped_steps), ("sim_time", twin.runner.t)])
-        behind = st.recent_misses > 0 or st.dropped_snapshots > 0
+        behind = st.recent_misses > 0 or st.dropped_publications > 0
         timing = entry("deadlines", warn if behind else ok, twin._behind_message or "keeping real time",
                        [("deadline_misses", st.deadline_misses), ("recent_misses", st.recent_misses),
                         ("window_steps", twin.stepper.cfg.window), ("overruns", st.overruns),
-                        ("dropped_publications", st.dropped_snapshots), ("step_wall_p50_s", walls["p50"]),
+                        ("dropped_publications", st.dropped_publications), ("step_wall_p50_s", walls["p50"]),
                         ("step_wall_p99_s", walls["p99"]), ("real_time_factor", twin._rtf()), ("dt", twin.dt),
                         ("rss_mb", round(twin._rss_now, 1)), ("rss_at_start_mb", round(twin._rss_start, 1))])
         rej, lost = dict(c.rejections), dict(twin.commands_lost)

@@ -13,13 +13,14 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 class NodeProcess:
-    """``flexmb node ...`` as a child process, its log in a file."""
+    """``flexmb node ...`` as a child process, its log in a file (``stderr``: where its stderr goes
+    instead, e.g. ``subprocess.PIPE``)."""
 
-    def __init__(self, args: list[str], env: dict, log_path: Path):
+    def __init__(self, args: list[str], env: dict, log_path: Path, stderr=subprocess.STDOUT):
         self.log_path = log_path
         self._log = open(log_path, "w")
         self.proc = subprocess.Popen([sys.executable, "-m", "flexmb.cli", "node", *args], env=env, cwd=ROOT,
-                                     stdout=self._log, stderr=subprocess.STDOUT)
+                                     stdout=self._log, stderr=stderr)
 
     def log(self) -> str:
         self._log.flush()

@@ -142,11 +142,11 @@ def test_bad_commands_are_rejected_and_the_node_keeps_stepping(tmp_path, dds_env
         # still alive and stepping on the last valid command; never NaN
         _send_and_wait(client, node, T.COMMANDS, to_ros(T.COMMANDS.type, M.float64_array(good)))
         assert node.alive()
-        log = node.log()
     finally:
         client.close()
         rc = node.stop()
     assert rc == 130
+    log = node.log_path.read_text()     # complete once the node stopped (its log is written apart)
     for kind, topic, _ in cases:
         assert f"{topic.resolved()}: rejected ({kind})" in log, f"no log line for {kind}:\n{log}"
     assert "stroke [0.65, 1.65] m" in log and "no_such_leg" in log

@@ -74,3 +74,38 @@ def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env):
     assert cpu["process"] > cpu["solver_steps"] > 0
     solver = [st for d in client.received[T.DIAGNOSTICS.name] for st in d.status if st.name.endswith(": solver")]
     assert solver and all(st.level == OK for st in solver)
+
+
+@pytest.mark.timeout(180)
+def test_a_log_nobody_reads_stalls_nothing(tmp_path, dds_env):
+    """stderr is a pipe nobody reads (``flexmb node … 2>&1 | less``, paused): a flood of rejected
+    commands, each warned about (``log_throttle`` 0), fills it many times over. The twin must go on
+    stepping and answering, stop on SIGINT with 130, and count the log lines it could not write
+    (before, the publisher thread blocked in its log write and the node grew without bound)."""
+    import subprocess
+
+    from std_msgs.msg import Float64MultiArray
+
+    summary = tmp_path / "s.json"
+    node = NodeProcess([SCENE, "--mode", "realtime", "--summary-json", str(summary), "--quiet",
+                        "--ros-args", "-p", "log_throttle:=0.0"], dds_env, tmp_path / "node.log",
+                       stderr=subprocess.PIPE)
+    client = TwinClient()
+    try:
+        client.wait_for_twin(node)
+        for _ in range(3000):          # ≈ 150 bytes of warning each: 450 kB against a 64 kB pipe
+            client.publish(T.COMMANDS, Float64MultiArray(data=[1.0, 2.0]))
+            client.executor.spin_once(timeout_sec=5e-4)
+        client.spin_until(lambda: client.statuses()[-1].rejected_commands >= 1000, 60,
+                          "the twin to have rejected 1000 of the flood", node)
+        t_flood = client.statuses()[-1].sim_time
+        before = len(client.statuses())
+        client.spin_until(lambda: len(client.statuses()) > before + 20, 20,
+                          "statuses after the log's pipe filled", node)
+        assert client.statuses()[-1].sim_time > t_flood + 0.01
+    finally:
+        client.close()
+    assert node.stop(timeout=20.0) == 130, node.log()
+    s = json.loads(summary.read_text())
+    assert s["commands_rejected"]["size"] >= 1000, s["commands_rejected"]
+    assert s["log_lines_dropped"] > 0, s

@@ -205,3 +205,28 @@ def test_a_step_margin_beyond_dt_keeps_the_twin_ahead_and_commands_still_step_at
     else:
         assert ahead < dt + 1e-4, (ahead, leads)        # at most the step in hand
     assert snap is not None and snap.answered           # the command's step ran at once, on this thread
+
+
+def test_a_stalled_publisher_bounds_the_outbox_and_refuses_commands_it_could_not_record(stewart):
+    """Nobody drains the outbox (the publisher stalled): it stops at ``outbox_limit`` events, the
+    states beyond are counted as dropped publications, and a command is refused unapplied (it could
+    not be recorded) and counted as ``publisher_stalled``; once drained, commands apply again."""
+    from flexmb_io.commands import PUBLISHER_STALLED
+
+    model, program = stewart
+    runner = TwinRunner(model)
+    runner.start()
+    st = Stepper(runner, StepperConfig(mode="lockstep", publish_every=1, clock_every=1, outbox_limit=40),
+                 lambda: None)
+    st.hold()
+    done, _ = st.step_n(100)
+    assert done == 100 and len(st.outbox) == 40
+    assert st.stats.stalled_drops == 2 * 100 + 2 - 40       # a state and a /clock per step, the held pair
+    assert st.stats.dropped_publications == st.stats.stalled_drops
+    command = {"data": list(program.command_lengths(0.0) + 0.001)}
+    assert st.submit("/t", "commands", command, 0.0) is None
+    assert runner.schedule.accepted == 0 and runner.counters.rejections == {PUBLISHER_STALLED: 1}
+    assert len(st.outbox) == 40
+    st.outbox.clear()
+    st.submit("/t", "commands", command, 0.0)
+    assert runner.schedule.accepted == 1 and st.outbox[-1][0] == "cmd"
