@@ -155,6 +155,31 @@ def _evaluate_lines(t, base, rate, t_ref, fade_t, fade_T, seg_t0, seg_end, seg_p
 
 
 @njit(cache=True, nogil=True)
+def _bound_joins(idx, now, a_max, h_max, base, rate, t_ref, seg_p0, seg_v0, seg_end, fade_t):
+    """Lengthen the cubic joins of actuators ``idx`` (starting at ``now``) until the commanded
+    length's acceleration stays within ``a_max`` (m/s²), at most to ``h_max`` (s). A cubic's
+    acceleration is linear in time, so it peaks at an end of the join:
+    ``(6d − 2h(2v₀ + v₁))/h²`` and ``(−6d + 2h(v₀ + 2v₁))/h²`` with ``d`` the join's rise onto the
+    line. A join that already complies is left as it is (bit for bit); the line's fade starts no
+    earlier than the join's new end."""
+    for j in range(idx.size):
+        i = idx[j]
+        h = seg_end[i] - now
+        v0 = seg_v0[i]
+        v1 = rate[i]
+        for _ in range(64):
+            d = base[i] + v1 * (now + h - t_ref[i]) - seg_p0[i]
+            a = max(abs(6.0 * d - 2.0 * h * (2.0 * v0 + v1)), abs(-6.0 * d + 2.0 * h * (v0 + 2.0 * v1))) / (h * h)
+            if a <= a_max or h >= h_max:
+                break
+            h = min(1.25 * h, h_max)
+        if now + h != seg_end[i]:
+            seg_end[i] = now + h
+            if fade_t[i] < seg_end[i]:
+                fade_t[i] = seg_end[i]
+
+
+@njit(cache=True, nogil=True)
 def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, hist_n, hist_stamped, base, rate):
     """The parabola through each new sample ``lengths[j]`` (actuator ``idx[j]``, sample time ``tau``)
     and its previous two (``hist_*``, shifted in here), evaluated ``dt1`` after ``tau``: its length
@@ -276,12 +301,20 @@ class CommandSchedule:
     max_rate : m/s, scalar or (na,): commanded rates beyond it are rejected (the servo's
         ``max_rate`` where one is declared, ``max_command_rate`` otherwise)
     max_points : most points a trajectory may have
+    max_accel : m/s², most acceleration of the commanded length while a smooth (cubic) hold joins
+        a new command's line: a join that would need more is lengthened (up to
+        ``MAX_HOLD_PERIOD``). A regular stream's joins are far below it and stay as they are; a
+        command whose line disagrees with the length in force — a late stamp extrapolated, a
+        clock that jumped, a step — is reached over a time a real actuator could, not in one
+        Δt (measured: a player whose twin-time estimate went stale by ~0.5 s made 1.5 cm kinks
+        in one step, 15 000 m/s², and the frame-leg twin's Newton iterations per step rose from
+        1.2 to 11 and then stalled). ``inf`` disables it.
     """
 
     def __init__(self, names, stroke: np.ndarray, rest: np.ndarray, *, timeout: float = math.inf,
                  behaviour: str = "hold", ramp_time: float = 1.0, stale_after: float = 1.0,
                  max_lead: float = 1.0, hold: str = "smooth", dt: float = 1e-3, max_rate=10.0,
-                 max_points: int = 10000):
+                 max_points: int = 10000, max_accel: float = math.inf):
         if behaviour not in ("hold", "ramp_to_rest"):
             raise ValueError(f"timeout behaviour must be 'hold' or 'ramp_to_rest', got {behaviour!r}")
         if hold not in HOLDS:
@@ -301,6 +334,9 @@ class CommandSchedule:
         self.stale_after, self.max_lead = stale_after, max_lead
         self.hold, self.dt, self.max_points = hold, float(dt), int(max_points)
         self.max_rate = np.broadcast_to(np.asarray(max_rate, dtype=float), (na,)).copy()
+        if not max_accel > 0.0:
+            raise ValueError(f"max_accel must be > 0 m/s² (inf: unbounded), got {max_accel!r}")
+        self.max_accel = float(max_accel)
         self.max_period = max(self.dt, min(MAX_HOLD_PERIOD, timeout))
         # the commanded line L(t) = base + rate (t − t_ref), per actuator
         self.base = self.rest.copy()         # m, length at the reference time
@@ -606,11 +642,19 @@ class CommandSchedule:
             self.t_ref[idx] = t_ref
         if T > 0.0:
             self.seg_t0[idx] = now
-            self.seg_end[idx] = now + T
+            # a line stamped ahead of the twin's time (a controller whose clock runs ahead, commands
+            # that arrive early) is joined at its stamp, where it is what it says: joined one period
+            # from now, a line of a curved motion is taken far from its stamp, where it is wrong by
+            # L''(s − t)²/2 — measured: a player's estimate 0.5 s ahead made 1.5 cm kinks in one step
+            self.seg_end[idx] = t_ref if rates is not None and stamp > now + T else now + T
             self.seg_p0[idx] = cur[idx]
             self.seg_v0[idx] = vcur[idx]
-            self.seg_cubic[idx] = rates is not None or self.hold == "smooth"
+            cubic = rates is not None or self.hold == "smooth"
+            self.seg_cubic[idx] = cubic
             self.last_period = T
+            if cubic and self.max_accel < math.inf:
+                _bound_joins(np.ascontiguousarray(idx, dtype=np.int64), float(now), self.max_accel, MAX_HOLD_PERIOD,
+                             self.base, self.rate, self.t_ref, self.seg_p0, self.seg_v0, self.seg_end, self.fade_t)
         else:
             self.seg_end[idx] = -math.inf
         self._mark_accepted(now, stamp)
@@ -632,6 +676,8 @@ class CommandSchedule:
         _predict_lines(np.arange(na, dtype=np.int64), z, 0.0, False, self.dt, self.dt, 0.0, np.zeros((na, 2)),
                        np.zeros((na, 2)), zi.copy(), np.zeros(na, dtype=bool), np.zeros(na), np.zeros(na))
         _interval_stats(np.full(3, self.dt))
+        _bound_joins(np.arange(na, dtype=np.int64), 0.0, 1.0, MAX_HOLD_PERIOD, z, z, z, z, z, z + self.dt,
+                     np.zeros(na))
 
     # -- evaluation ----------------------------------------------------------------------------
     def _lines(self, t: float) -> None:

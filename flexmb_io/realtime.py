@@ -271,6 +271,7 @@ class Stepper:
         self._seq = 0
         self.stats = StepperStats()
         self.step_walls = Samples()
+        self.iterations = Samples(1 << 16)    # Newton iterations per step (the newest 65 536 steps)
         self.lateness = Samples()
         self._miss_ring = np.zeros(config.window, dtype=np.int8)
         self._new_command = False
@@ -491,6 +492,8 @@ class Stepper:
         b = time.perf_counter()
         wall = b - a
         self.step_walls.add(wall)
+        if runner.sim.last is not None:
+            self.iterations.add(runner.sim.last.iterations)
         late = b - deadline if deadline != math.inf else 0.0
         missed = late > 0.0
         if deadline != math.inf:

@@ -43,6 +43,7 @@ class RunnerOptions:
     max_lead: float = 1.0                 # s
     command_hold: str = "smooth"          # smooth (C¹) | ramp (linear) | step: see flexmb_io.commands
     max_command_rate: float = 10.0        # m/s, commanded rates beyond are rejected (actuators without a servo)
+    max_command_accel: float = 50.0       # m/s², most acceleration of a smooth hold's join (CommandSchedule)
     max_trajectory_points: int = 10000    # longer trajectories are rejected
     # JointState commands (~/joint_commands): False applies them on arrival (their stamp ignored, as
     # topic_based_ros2_control stamps with its controller manager's clock); True checks and uses the
@@ -56,7 +57,7 @@ class RunnerOptions:
         return cls(command_source=p.command_source, command_timeout=p.command_timeout,
                    timeout_behaviour=p.command_timeout_behaviour, ramp_time=p.ramp_time, stale_after=p.stale_after,
                    max_lead=p.max_lead, command_hold=p.command_hold, max_command_rate=p.max_command_rate,
-                   max_trajectory_points=p.max_trajectory_points, joint_command_stamps=p.joint_command_stamps)
+                   max_command_accel=p.max_command_accel, max_trajectory_points=p.max_trajectory_points, joint_command_stamps=p.joint_command_stamps)
 
     def validate(self) -> None:
         if self.command_source not in ("external", "scene"):
@@ -66,7 +67,8 @@ class RunnerOptions:
                               f"{self.timeout_behaviour!r}")
         if self.command_hold not in HOLDS:
             raise FlexmbError(f"command_hold must be one of {list(HOLDS)}, got {self.command_hold!r}")
-        for name in ("command_timeout", "ramp_time", "stale_after", "max_lead", "max_command_rate"):
+        for name in ("command_timeout", "ramp_time", "stale_after", "max_lead", "max_command_rate",
+                     "max_command_accel"):
             v = getattr(self, name)
             if not (v > 0):
                 raise FlexmbError(f"{name} must be > 0, got {v}")
@@ -83,12 +85,17 @@ class StepOutcome:
     message: str = ""
 
 
+# failed steps in a row after which the twin stops (TwinRunner)
+STUCK_AFTER = 10
+
+
 @dataclass
 class RunnerCounters:
     steps: int = 0                 # steps attempted
     failed_steps: int = 0          # steps rejected (no convergence, or a non-finite state)
     flagged_steps: int = 0         # steps accepted unconverged (policy accept_flagged)
     substepped_steps: int = 0
+    failed_in_a_row: int = 0       # failed steps since the last one that advanced
     last_message: str = ""
     rejections: dict = field(default_factory=dict)   # kind → count
     faults: dict = field(default_factory=dict)       # flexmb_core.faults kind → steps that showed it
@@ -101,6 +108,11 @@ class TwinRunner:
     Never raises on a bad step: a step that does not converge (after the scene's
     ``on_unconverged`` policy) or leaves a non-finite state is rolled back and reported in the
     outcome; the next call tries again from the last good state with the commands then in force.
+    After :data:`STUCK_AFTER` failed steps in a row the twin stops (``counters.stopped``, as
+    ``limits.on_violation: stop`` does) and says why: a state from which no step converges does not
+    recover by itself, and each try costs the most the solver spends on a step (measured, issue 12:
+    a frame-leg twin whose commands had kinked by 1.5 cm in one step failed every step from
+    t = 3.211 s on, with 16 sub-steps each, its time stopped for good and the node busy).
     """
 
     def __init__(self, model: Model, spec: SolverSpec | None = None, options: RunnerOptions | None = None):
@@ -146,7 +158,8 @@ class TwinRunner:
                                             behaviour=o.timeout_behaviour, ramp_time=o.ramp_time,
                                             stale_after=o.stale_after, max_lead=o.max_lead, hold=o.command_hold,
                                             dt=self.dt, max_rate=max_rate,
-                                            max_points=int(o.max_trajectory_points))
+                                            max_points=int(o.max_trajectory_points),
+                                            max_accel=float(o.max_command_accel))
             self.sim.set_commands(rest)
         if warmup and self.schedule is not None:
             self.schedule.warmup()
@@ -220,6 +233,22 @@ class TwinRunner:
             return StepOutcome(False, True, c.stopped)
         c.steps += 1
         t_new = sim.state.t + self.dt
+        outcome = self._attempt(t_new)
+        if outcome is not None:
+            c.failed_in_a_row = 0 if outcome.advanced else c.failed_in_a_row
+            return outcome
+        c.failed_steps += 1
+        c.failed_in_a_row += 1
+        if c.failed_in_a_row >= STUCK_AFTER:
+            c.stopped = (f"stopped at t = {sim.state.t:.6g} s: {c.failed_in_a_row} steps in a row failed, the last: "
+                         f"{c.last_message} — no step converges from this state (~/reset restarts the twin)")
+            c.last_message = c.stopped
+        return StepOutcome(False, False, c.last_message)
+
+    def _attempt(self, t_new: float) -> StepOutcome | None:
+        """One try of the step to ``t_new`` on the commands in force: its outcome, or None when it
+        failed (rolled back; the reason in ``counters.last_message``)."""
+        sim, c = self.sim, self.counters
         if self.schedule is not None:
             sim.set_commands(self.schedule.lengths_at(t_new), check=False)   # validated on reception
         self._backup.assign(sim.state)
@@ -235,15 +264,13 @@ class TwinRunner:
                 message = res.message
         except ConvergenceError as exc:
             sim.state.assign(self._backup)
-            c.failed_steps += 1
             c.last_message = f"step to t = {t_new:.6g} s rejected, state kept at t = {sim.state.t:.6g} s: {exc}"
-            return StepOutcome(False, False, c.last_message)
+            return None
         st = sim.state
         if not (np.isfinite(st.q).all() and np.isfinite(st.v).all()):
             sim.state.assign(self._backup)
-            c.failed_steps += 1
             c.last_message = f"step to t = {t_new:.6g} s produced non-finite values; state kept at t = {sim.state.t:.6g} s"
-            return StepOutcome(False, False, c.last_message)
+            return None
         if self.faults.active:
             fault = self._check_faults(t_new)
             if fault is not None:

@@ -798,6 +798,7 @@ class TwinNode:
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
+            "newton_iterations": _iterations(self.stepper.iterations),
             "deadline_slack_s": self.stepper.lateness.percentiles((1, 50), sign=-1.0),
             "command_to_state_latency_s": self._latencies.percentiles(),
             "failed_steps": c.failed_steps, "flagged_steps": c.flagged_steps, "substepped_steps": c.substepped_steps,
@@ -936,6 +937,14 @@ def _declare(node, spec, value, descriptor):
             expected = f"one of {list(spec.choices)}" if spec.choices else "a valid value"
         raise FlexmbError(f"parameter '{spec.name}' (flag --{spec.name.replace('_', '-')} or -p "
                           f"{spec.name}:=...): expected {expected}; rclpy: {str(exc)[:160]}") from None
+
+
+def _iterations(samples: Samples) -> dict:
+    """Newton iterations per step: mean over the run, p50/p99/max over the newest steps the
+    buffer holds."""
+    out = samples.percentiles()
+    out["mean"] = samples.total / samples.count if samples.count else 0.0
+    return out
 
 
 def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: list[str] | None = None) -> dict:

@@ -160,6 +160,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
               f"{cpu['solver_steps']:.2f} s: the node costs {100 * cpu['beyond_solver_core_fraction']:.1f} % of a "
               "core beyond its solver")
     print(f"  step wall time p50 {_fmt_ms(sw['p50'])}, p99 {_fmt_ms(sw['p99'])}, max {_fmt_ms(sw['max'])}")
+    it = n.get("newton_iterations")
+    if it:
+        print(f"  Newton iterations per step: mean {it['mean']:.2f}, p99 {it['p99']:.0f}, max {it['max']:.0f}")
     print(f"  command → state latency (player, over DDS, {lat['count']} commands): p50 {_fmt_ms(lat['p50'])}, "
           f"p99 {_fmt_ms(lat['p99'])}, max {_fmt_ms(lat['max'])}")
     if "tracking" in p:

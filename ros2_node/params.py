@@ -56,6 +56,9 @@ SPECS: tuple[ParamSpec, ...] = (
               choices=("smooth", "ramp", "step")),
     ParamSpec("max_command_rate", 10.0, "commanded rates (m/s) beyond this are rejected, for actuators without a "
               "servo (a servo's max_rate is their limit)", low=1e-9, high=1e6),
+    ParamSpec("max_command_accel", 50.0, "most acceleration (m/s²) of the commanded length while the smooth hold "
+              "joins a new command: a join that would need more is lengthened (a late stamp, a jumped clock, a "
+              "step is reached over a time a real actuator could); 1e12 makes it unbounded", low=1e-6, high=1e12),
     ParamSpec("max_trajectory_points", 10000, "joint trajectories with more points are rejected", low=1,
               high=10_000_000),
     ParamSpec("joint_command_stamps", False, "false: ~/joint_commands (JointState) apply on arrival, their stamp "
@@ -112,6 +115,7 @@ class NodeParams:
     max_lead: float = 1.0
     command_hold: str = "smooth"
     max_command_rate: float = 10.0
+    max_command_accel: float = 50.0
     max_trajectory_points: int = 10000
     joint_command_stamps: bool = False
     qos_depth: int = 10

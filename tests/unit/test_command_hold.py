@@ -105,6 +105,61 @@ def test_smooth_hold_of_bare_lengths_is_continuous_in_rate_and_follows_a_parabol
     np.testing.assert_allclose(Lt, f(tt - 0.01), atol=1e-12)
 
 
+def _jumped_stream(max_accel: float):
+    """A stamped 1 kHz stream on the line L = 1 + 0.03 t (m, with its rate); from 0.05 s on, lines
+    15 mm ahead of it (what a player's stale twin-time estimate makes of a curved law: a line
+    extrapolated far from its stamp disagrees with the one in force)."""
+    cs = _schedule(max_accel=max_accel)
+    line = lambda s: 1.0 + 0.03 * s + (0.015 if s >= 0.05 - 1e-9 else 0.0)    # noqa: E731
+    ev = [(k * DT, lambda c, now, s=k * DT: c.command_named("/a", ["a"], [line(s)], [0.03], s, now))
+          for k in range(1, 600)]
+    return _trace(cs, ev, 0.6, h=1e-4)
+
+
+def test_a_join_onto_a_far_line_keeps_within_max_accel_and_a_regular_stream_is_untouched():
+    t, L = _jumped_stream(50.0)
+    acc = np.diff(L[:, 0], 2) / 1e-4 ** 2
+    assert np.abs(acc).max() <= 50.0 * 1.01
+    assert L[-1, 0] == pytest.approx(1.0 + 0.03 * 0.6 + 0.015, abs=1e-9)    # on the new line long since
+    _, L_free = _jumped_stream(math.inf)
+    assert np.abs(np.diff(L_free[:, 0], 2) / 1e-4 ** 2).max() > 1e4          # the kink it replaces
+    # a stream whose joins comply (4 m/s²) is the same bit for bit with the bound
+    f = lambda t: 1.0 + 0.1 * t + 2.0 * t * t                            # noqa: E731
+    ev = [(0.01 * k, lambda c, now, k=k: c.command_array("/c", [f(0.01 * k), 1.0], now)) for k in range(30)]
+    assert np.array_equal(_trace(_schedule(max_accel=50.0), ev, 0.3)[1], _trace(_schedule(), ev, 0.3)[1])
+
+
+def test_a_line_stamped_ahead_is_joined_at_its_stamp():
+    """A stamped line 0.3 s ahead of the twin's time (within max_lead) is reached at its stamp,
+    exactly, C¹ from the length in force; before, it was joined one period from now, where the line
+    of a curved motion is wrong by L''(s − t)²/2."""
+    cs = _schedule()
+    s, L1, v1 = 0.3, 1.05, 0.1
+    ev = [(0.01 * k, lambda c, now, k=k: c.command_named("/a", ["a"], [1.0], [0.0], 0.01 * k, now))
+          for k in range(1, 9)]                         # a regular 100 Hz stream first: T = 10 ms
+    ev.append((0.09, lambda c, now: c.command_named("/a", ["a"], [L1], [v1], s, now)))
+    t, L = _trace(cs, ev, 0.35, h=1e-4)
+    i = int(round(s / 1e-4))
+    assert L[i, 0] == pytest.approx(L1, abs=1e-12)
+    assert L[i + 100, 0] == pytest.approx(L1 + v1 * 0.01, abs=1e-12)            # then on the line
+    assert np.abs(np.diff(_rate(t, L)[:, 0])).max() < 0.05 * 1e-4 / 1e-4        # no rate jump
+    assert np.all(np.diff(L[:i, 0]) >= -1e-15) and L[int(round(0.15 / 1e-4)), 0] < 1.03  # on its way
+
+
+def test_the_twin_clock_runs_between_reports_and_takes_late_reports_gently():
+    from ros2_node.player import TwinClock
+
+    c = TwinClock(slew=0.25, resync=0.2)
+    c.report(1.0, 10.0)
+    assert c.now(10.6) == pytest.approx(1.6)           # no report for 0.6 s: it runs on (it froze at 3 Δt)
+    c.report(1.65, 10.6)                                # a report further on: taken at once
+    assert c.now(10.6) == pytest.approx(1.65)
+    c.report(1.66, 10.62)                               # reports lag (late, never early): pulled back
+    assert c.now(10.62) == pytest.approx(1.67 - 0.25 * 0.02)          # by at most slew × 0.02 s
+    c.report(1.0, 10.7)                                 # far behind (a reset): re-synchronised
+    assert c.now(10.7) == pytest.approx(1.0)
+
+
 def test_period_is_observed_on_stamps_and_on_arrival():
     cs = _schedule()
     for k in range(1, 12):                          # stamped 50 Hz, arriving at irregular twin times

@@ -100,3 +100,27 @@ def test_bad_limits_are_refused_naming_the_key(limits, message):
     with pytest.raises(SceneError) as e:
         _model(limits)
     assert message in str(e.value)
+
+
+def test_a_twin_from_whose_state_no_step_converges_stops_and_says_why():
+    """A 0.5 m step of every leg in one Δt (step hold, no acceleration bound) throws the 1-element
+    frame-leg twin into a state from which no step converges, even with 16 sub-steps. It used to
+    retry that step for ever, its time frozen; it now stops after STUCK_AFTER failures in a row,
+    with the reason, and a reset brings it back."""
+    from flexmb_core.scene import load_scene
+    from flexmb_io.twin import STUCK_AFTER
+
+    path = SCENE.parent / "stewart_platform_1el.yaml"
+    r = TwinRunner(compile_scene(load_scene(str(path))),
+                   options=RunnerOptions(command_hold="step", max_command_accel=1e12))
+    r.start()
+    assert r.command_array("/c", list(r.schedule.lengths_at(0.0) + 0.5)) is None
+    outcomes = [r.step() for _ in range(40)]
+    failed = [o for o in outcomes if not o.advanced]
+    assert r.counters.stopped and r.counters.failed_steps == STUCK_AFTER
+    assert f"{STUCK_AFTER} steps in a row failed" in r.counters.stopped
+    assert "no step converges from this state" in failed[-1].message
+    t_stop = r.t
+    assert not r.step().advanced and r.t == t_stop          # stays stopped, state kept
+    r.reset()
+    assert not r.counters.stopped and r.step().advanced
