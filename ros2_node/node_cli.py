@@ -68,7 +68,8 @@ def cmd_play(args: argparse.Namespace) -> int:
     else:
         source = CommandSource.from_scene(args.scene)
     summary = run_player(source, json_out=args.json, twin=args.twin, mode=args.mode, until=args.until, dt=args.dt,
-                         rate=args.rate, topic=args.topic, timeout=args.timeout)
+                         rate=args.rate, topic=args.topic, timeout=args.timeout,
+                         **({} if args.lead is None else {"lead": args.lead}))
     if not args.quiet:
         print(json.dumps(summary, indent=2))
     return 0
@@ -227,6 +228,8 @@ def register(verbs, run_parser) -> None:
     p.add_argument("--until", type=float, default=20.0, help="s of simulated time")
     p.add_argument("--dt", type=float, default=1e-3, help="lockstep: s between commands")
     p.add_argument("--rate", type=float, default=1000.0, help="realtime: commands per second")
+    p.add_argument("--lead", type=float, default=None,
+                   help="realtime: s ahead of the twin's time the stamped commands are for (default 0.05)")
     p.add_argument("--topic", choices=("actuator_commands", "commands"), default="actuator_commands")
     p.add_argument("--timeout", type=float, default=30.0, help="s to wait for the twin")
     p.add_argument("--json", metavar="OUT", help="write the player summary here")

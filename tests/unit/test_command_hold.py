@@ -372,3 +372,12 @@ def test_csv_source_uses_the_lookup(tmp_path):
     for q in (0.0, 3.2105, 3.2115, 19.9985, 25.0):
         L, _ = src.at(q)
         np.testing.assert_array_equal(L, [np.interp(q, t, data[:, 1]), np.interp(q, t, data[:, 2])])
+
+
+@pytest.mark.parametrize("lead", [-0.01, math.inf, math.nan])
+def test_the_player_refuses_a_lead_that_is_no_time_ahead(lead):
+    from flexmb_core.errors import FlexmbError
+    from ros2_node.player import Player
+
+    with pytest.raises(FlexmbError, match="--lead: expected s ≥ 0"):
+        Player(CommandSource.from_scene(str(SCENE)), context=None, mode="realtime", lead=lead)
