@@ -155,12 +155,12 @@ class StepperStats:
     overruns: int = 0
     dropped_snapshots: int = 0       # publications the publisher fell too far behind to make
     stalled_drops: int = 0           # publications and /clock events not queued: the outbox was full
+    recent_misses: int = 0           # deadline misses within the last ``window`` steps
 
     @property
     def dropped_publications(self) -> int:
         """Publications never made: lapped in the ring, or not queued into a full outbox."""
         return self.dropped_snapshots + self.stalled_drops
-    recent_misses: int = 0           # deadline misses within the last ``window`` steps
 
 
 class Samples:

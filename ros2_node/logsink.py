@@ -26,9 +26,10 @@ import threading
 # healthy sink never holds more than a few
 CAPACITY = 256
 _STOP = object()
-# characters of one line at most: below a pipe's page (4096 bytes), so that a write into a pipe
-# that polls writable never blocks (rcutils adds ≈ 60 bytes of severity, time and name)
-MAX_LINE = 3000
+# characters of one line at most: below a pipe's page (4096 bytes) even at 3 bytes a character
+# (UTF-8 Δ, →), so that a write into a pipe that polls writable never blocks (rcutils adds ≈ 60
+# bytes of severity, time and name); the node's messages quote bounded excerpts and stay far below
+MAX_LINE = 1200
 
 
 def console_fd() -> int:

@@ -82,3 +82,15 @@ def test_lines_keep_their_order_and_level_and_close_writes_them_all():
     assert log.close(timeout=5.0) is True and log.dropped == 0
     os.close(w)
     assert _read_all(r).decode().splitlines() == ["[info] one", "[warning] two", "[error] three", "[debug] four"]
+
+
+def test_a_long_line_is_cut_below_a_pipe_page():
+    from ros2_node.logsink import MAX_LINE
+
+    r, w = os.pipe()
+    log = DeferredLogger(_PipeLogger(w), fd=w)
+    log.warning("Δ" * 5000)
+    assert log.close(timeout=5.0) is True
+    os.close(w)
+    line = _read_all(r).decode().splitlines()[0]
+    assert line == "[warning] " + "Δ" * MAX_LINE + "…" and len(line.encode()) < 4096 - 100
