@@ -263,7 +263,7 @@ class Player:
     def _note_time(self, t: float, wall: float) -> None:
         if self.sim_time is None or t > self.sim_time:
             self.sim_time = t
-            self.clock.report(t, wall)
+        self.clock.report(t, wall)      # every report: a paused or reset twin pulls the estimate back
 
     def _on_pose(self, msg) -> None:
         ref = self.source.reference_pose

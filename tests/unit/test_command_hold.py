@@ -158,6 +158,9 @@ def test_the_twin_clock_runs_between_reports_and_takes_late_reports_gently():
     assert c.now(10.62) == pytest.approx(1.67 - 0.25 * 0.02)          # by at most slew × 0.02 s
     c.report(1.0, 10.7)                                 # far behind (a reset): re-synchronised
     assert c.now(10.7) == pytest.approx(1.0)
+    for k in range(1, 200):                             # a paused twin reports the same time: the
+        c.report(1.0, 10.7 + 0.01 * k)                  # estimate slows, then re-synchronises
+        assert c.now(10.7 + 0.01 * k) - 1.0 <= 0.2 + 0.01
 
 
 def test_period_is_observed_on_stamps_and_on_arrival():
