@@ -487,13 +487,15 @@ class Stepper:
         answer to the command itself (see :meth:`submit`); ``due``: publish this state whatever
         the decimation."""
         runner, cfg = self.runner, self.cfg
+        attempts = runner.counters.steps
         a = time.perf_counter()
         outcome = runner.step()
         b = time.perf_counter()
         wall = b - a
         self.step_walls.add(wall)
-        if runner.sim.last is not None:
-            self.iterations.add(runner.sim.last.iterations)
+        last = runner.sim.last
+        if runner.counters.steps > attempts and last is not None:   # a stopped twin attempts none
+            self.iterations.add(last.iterations)
         late = b - deadline if deadline != math.inf else 0.0
         missed = late > 0.0
         if deadline != math.inf:

@@ -235,7 +235,8 @@ class TwinRunner:
         t_new = sim.state.t + self.dt
         outcome = self._attempt(t_new)
         if outcome is not None:
-            c.failed_in_a_row = 0 if outcome.advanced else c.failed_in_a_row
+            if outcome.advanced:
+                c.failed_in_a_row = 0
             return outcome
         c.failed_steps += 1
         c.failed_in_a_row += 1

@@ -338,6 +338,18 @@ def _l2(f, bmat, nip, gm, gs, adjoint):
             f[r, dst + c] = g * (t - f[r, src + c])
 
 
+@njit(cache=True, inline="always")
+def _congruence(x00, x01, x02, x10, x11, x12, x20, x21, x22, d0, d1, d2, d3, d4):
+    """Mᵀ D M of the 3 × 3 M = [x_ab] and the symmetric D = [[d0, d2, d3], [d2, d1, d4], [d3, d4, 0]]
+    (the shell's assumed-strain corrections have no thickness-normal component): its components
+    (00, 11, 22, 01, 02, 12). With u, v, z the rows of D M, (Mᵀ D M)_ij = x_0i u_j + x_1i v_j + x_2i z_j."""
+    u0 = d0 * x00 + d2 * x10 + d3 * x20; u1 = d0 * x01 + d2 * x11 + d3 * x21; u2 = d0 * x02 + d2 * x12 + d3 * x22
+    v0 = d2 * x00 + d1 * x10 + d4 * x20; v1 = d2 * x01 + d1 * x11 + d4 * x21; v2 = d2 * x02 + d1 * x12 + d4 * x22
+    z0 = d3 * x00 + d4 * x10; z1 = d3 * x01 + d4 * x11; z2 = d3 * x02 + d4 * x12
+    return (x00 * u0 + x10 * v0 + x20 * z0, x01 * u1 + x11 * v1 + x21 * z1, x02 * u2 + x12 * v2 + x22 * z2,
+            x00 * u1 + x10 * v1 + x20 * z1, x00 * u2 + x10 * v2 + x20 * z2, x01 * u2 + x11 * v2 + x21 * z2)
+
+
 @njit(cache=True)
 def _stresses(a0inv, w, lam_l, mu, f, nip):
     """Pass 2: E* = E + (A⁰)⁻ᵀ ΔÊ(D) (A⁰)⁻¹ at every point, its SVK stress S* (into the point's row)
@@ -354,17 +366,14 @@ def _stresses(a0inv, w, lam_l, mu, f, nip):
             x00 = a0inv[p, 0, 0]; x01 = a0inv[p, 0, 1]; x02 = a0inv[p, 0, 2]
             x10 = a0inv[p, 1, 0]; x11 = a0inv[p, 1, 1]; x12 = a0inv[p, 1, 2]
             x20 = a0inv[p, 2, 0]; x21 = a0inv[p, 2, 1]; x22 = a0inv[p, 2, 2]
-            # u_i = d0 a_0i + d2 a_1i + d3 a_2i (row 0 of ΔÊ times a), v_i = d2 a_0i + d1 a_1i + d4 a_2i (row 1),
-            # z_i = d3 a_0i + d4 a_1i (row 2); ΔE_ij = a_0i u_j + a_1i v_j + a_2i z_j.
-            u0 = d0 * x00 + d2 * x10 + d3 * x20; u1 = d0 * x01 + d2 * x11 + d3 * x21; u2 = d0 * x02 + d2 * x12 + d3 * x22
-            v0 = d2 * x00 + d1 * x10 + d4 * x20; v1 = d2 * x01 + d1 * x11 + d4 * x21; v2 = d2 * x02 + d1 * x12 + d4 * x22
-            z0 = d3 * x00 + d4 * x10; z1 = d3 * x01 + d4 * x11; z2 = d3 * x02 + d4 * x12
-            e00 = f[row, PT_E] + (x00 * u0 + x10 * v0 + x20 * z0)
-            e11 = f[row, PT_E + 1] + (x01 * u1 + x11 * v1 + x21 * z1)
-            e22 = f[row, PT_E + 2] + (x02 * u2 + x12 * v2 + x22 * z2)
-            e01 = f[row, PT_E + 3] + (x00 * u1 + x10 * v1 + x20 * z1)
-            e02 = f[row, PT_E + 4] + (x00 * u2 + x10 * v2 + x20 * z2)
-            e12 = f[row, PT_E + 5] + (x01 * u2 + x11 * v2 + x21 * z2)
+            c00, c11, c22, c01, c02, c12 = _congruence(x00, x01, x02, x10, x11, x12, x20, x21, x22,
+                                                       d0, d1, d2, d3, d4)
+            e00 = f[row, PT_E] + c00
+            e11 = f[row, PT_E + 1] + c11
+            e22 = f[row, PT_E + 2] + c22
+            e01 = f[row, PT_E + 3] + c01
+            e02 = f[row, PT_E + 4] + c02
+            e12 = f[row, PT_E + 5] + c12
             tr = e00 + e11 + e22
             s00 = lam_l * tr + 2.0 * mu * e00
             s11 = lam_l * tr + 2.0 * mu * e11
@@ -701,17 +710,15 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
             al00 = f[row, PT_A]; al01 = f[row, PT_A + 1]; al02 = f[row, PT_A + 2]
             al10 = f[row, PT_A + 3]; al11 = f[row, PT_A + 4]; al12 = f[row, PT_A + 5]
             al20 = f[row, PT_A + 6]; al21 = f[row, PT_A + 7]; al22 = f[row, PT_A + 8]
-            k00 = u00 * al00 + u01 * al01 + u02 * al02; k01 = u00 * al10 + u01 * al11 + u02 * al12
-            k02 = u00 * al20 + u01 * al21 + u02 * al22
-            k10 = u01 * al00 + u11 * al01 + u12 * al02; k11 = u01 * al10 + u11 * al11 + u12 * al12
-            k12 = u01 * al20 + u11 * al21 + u12 * al22
-            k20 = u02 * al00 + u12 * al01; k21 = u02 * al10 + u12 * al11; k22 = u02 * al20 + u12 * al21
-            s00 = f[row, PT_S] + (al00 * k00 + al01 * k10 + al02 * k20)
-            s11 = f[row, PT_S + 1] + (al10 * k01 + al11 * k11 + al12 * k21)
-            s22 = f[row, PT_S + 2] + (al20 * k02 + al21 * k12 + al22 * k22)
-            s01 = f[row, PT_S + 3] + (al00 * k01 + al01 * k11 + al02 * k21)
-            s02 = f[row, PT_S + 4] + (al00 * k02 + al01 * k12 + al02 * k22)
-            s12 = f[row, PT_S + 5] + (al10 * k02 + al11 * k12 + al12 * k22)
+            # A⁰ Ũ A⁰ᵀ = Mᵀ Ũ M with M = A⁰ᵀ
+            c00, c11, c22, c01, c02, c12 = _congruence(al00, al10, al20, al01, al11, al21, al02, al12, al22,
+                                                       u00, u11, u01, u02, u12)
+            s00 = f[row, PT_S] + c00
+            s11 = f[row, PT_S + 1] + c11
+            s22 = f[row, PT_S + 2] + c22
+            s01 = f[row, PT_S + 3] + c01
+            s02 = f[row, PT_S + 4] + c02
+            s12 = f[row, PT_S + 5] + c12
             wp = w[p]
             # w P = w F S, then N = w P (A⁰)⁻ᵀ and its thickness moments.
             for i in range(3):
