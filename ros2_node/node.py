@@ -171,6 +171,9 @@ class TwinNode:
         self._draining = False                  # executor: _take_commands is spinning
         self.commands_lost: dict[str, int] = {}      # resolved command topic → messages lost before delivery
         self._out_event = threading.Event()
+        # held by the executor thread from a command's reception until its answer is complete: the
+        # publisher records an answered state only after its answer (it records the answer's bytes)
+        self._answering = threading.Lock()
         self._last_command_wall = None          # executor: newest message received
         self._accepted_wall = 0.0               # newest accepted command's reception (publisher)
         self._latency = 0.0                     # its command→state latency, once answered
@@ -486,9 +489,13 @@ class TwinNode:
         self._callbacks += 1
         self._last_command_wall = t_recv
         d = to_dict(msg) if self.recorder is not None else msg
-        snap = self.stepper.submit(self._names[topic.name], kind, d, t_recv, topic)
-        if snap is not None and snap.answered:
+        with self._answering:
+            snap = self.stepper.submit(self._names[topic.name], kind, d, t_recv, topic)
+            if snap is None or not snap.answered:
+                return
             self._answer(snap)
+        if snap.wake:
+            self._wake_publisher()
 
     def _on_lost(self, topic: T.Topic, event) -> None:
         """Fast DDS saw a gap in a command topic's samples: commands the publisher sent that never
@@ -504,7 +511,9 @@ class TwinNode:
     def _answer(self, snap: Snapshot) -> None:
         """The answer to a command whose step ran on this (the executor's) thread: status (the
         acknowledgement, echoing its stamp) and joint states, at once. Its own reporter and
-        messages: the publisher thread's are not touched. The publisher records the snapshot."""
+        messages: the publisher thread's are not touched. The serialized messages are kept on the
+        snapshot (``snap.answer``): the publisher records those bytes, what went out, instead of
+        reading the state and building both again."""
         view = self._answer_view
         view.state, view.last = snap.state, snap.result
         s = self._answer_reporter.read(view, False)
@@ -514,11 +523,17 @@ class TwinNode:
         self._latencies.add(self._latency)
         # the publisher has not seen this command's event yet: its age counts from now on
         self._accepted_wall = max(self._accepted_wall, snap.cmd_recv_wall)
-        if self._listened.get(T.STATUS.name, True):
-            status = M.status(s, self._timing(snap, snap.message), self.frames)
-            self._pub[T.STATUS.name].publish(serialize(T.STATUS.type, status))
-        if self._listened.get(T.JOINT_STATES.name, True):
-            self._pub[T.JOINT_STATES.name].publish(serialize(T.JOINT_STATES.type, M.joint_state(s, self.frames)))
+        recording = self.recorder is not None
+        status = joints = None
+        if recording or self._listened.get(T.STATUS.name, True):
+            status = serialize(T.STATUS.type, M.status(s, self._timing(snap, snap.message), self.frames))
+            if self._listened.get(T.STATUS.name, True):
+                self._pub[T.STATUS.name].publish(status)
+        if recording or self._listened.get(T.JOINT_STATES.name, True):
+            joints = serialize(T.JOINT_STATES.type, M.joint_state(s, self.frames))
+            if self._listened.get(T.JOINT_STATES.name, True):
+                self._pub[T.JOINT_STATES.name].publish(joints)
+        snap.answer = (status, joints)
 
     # -- outputs (publisher thread) ------------------------------------------------------------------------
     def _wake_publisher(self) -> None:
@@ -571,10 +586,27 @@ class TwinNode:
         else:
             self._warn(f"{topic_name}:{rejection.kind}", str(rejection))
 
+    def _record(self, topic: T.Topic, data, t: float) -> None:
+        """Record serialized bytes published elsewhere (an answer), when recording."""
+        if self.recorder is not None and data is not None:
+            self.recorder.write_cdr(self._resolved(topic), topic.type, data, t)
+
     def _publish(self, snap: Snapshot) -> None:
+        answer = None
+        if snap.answered:
+            with self._answering:        # its answer is complete (the executor holds this meanwhile)
+                answer = snap.answer
+        full = bool(snap.due or snap.shape_due)
+        if answer is not None and not full:
+            # answered and nothing else due: record what the answer published, as it went out
+            t = float(snap.state.t)
+            self._rtf_window.append((snap.end_wall, t))
+            self._record(T.STATUS, answer[0], t)
+            self._record(T.JOINT_STATES, answer[1], t)
+            self._last_sample = snap
+            return
         view = self._view
         view.state, view.last = snap.state, snap.result if snap.result is not None else view.last
-        full = bool(snap.due or snap.shape_due)
         s = self._reporter.read(view, full)
         if full:
             self._shells.read(snap.state.q)
@@ -585,20 +617,26 @@ class TwinNode:
             return
         frames = self.frames
         message = snap.message
-        answer = snap.on_command and not snap.answered
-        if answer:                  # the state that answers a command: its latency, measured here
+        answer_due = snap.on_command and not snap.answered
+        if answer_due:              # the state that answers a command: its latency, measured here
             self._latency = time.perf_counter() - snap.cmd_recv_wall
             self._latencies.add(self._latency)
-        # a snapshot answered on the command's thread is only recorded here (unless also due)
-        live_now = self._live
-        self._live = live_now and (snap.due or answer or snap.ack)
-        if snap.due or snap.on_command or snap.ack:
-            # the status first: it echoes the command's stamp, the acknowledgement clients wait for
-            timing = self._timing(snap, message)
-            self._out(T.STATUS, lambda: M.status(s, timing, frames), t)
-        if snap.due or snap.on_command:
-            self._out(T.JOINT_STATES, lambda: M.joint_state(s, frames), t)
-        self._live = live_now
+        if answer is not None:
+            # answered on the command's thread and also due: the answer went out already, its
+            # bytes are what is recorded (and not published a second time)
+            self._record(T.STATUS, answer[0], t)
+            self._record(T.JOINT_STATES, answer[1], t)
+        else:
+            # a snapshot answered on the command's thread is only recorded here (unless also due)
+            live_now = self._live
+            self._live = live_now and (snap.due or answer_due or snap.ack)
+            if snap.due or snap.on_command or snap.ack:
+                # the status first: it echoes the command's stamp, the acknowledgement clients wait for
+                timing = self._timing(snap, message)
+                self._out(T.STATUS, lambda: M.status(s, timing, frames), t)
+            if snap.due or snap.on_command:
+                self._out(T.JOINT_STATES, lambda: M.joint_state(s, frames), t)
+            self._live = live_now
         if snap.due:
             self._out(T.ACTUATOR_STATES, lambda: M.actuator_state(s, frames), t)
             for i, topic in enumerate(self._pose_topics):
@@ -630,7 +668,13 @@ class TwinNode:
         while out:
             events.append(out.popleft())
         slots = self.stepper.slots
-        newest = max((i for i, ev in enumerate(events) if ev[0] == "out"), default=-1)
+
+        def published_here(ev) -> bool:
+            # a state this thread publishes (an answered one only is recorded, unless also due)
+            snap = slots[ev[1]]
+            return snap.seq == ev[2] and (not snap.answered or snap.due or snap.shape_due)
+
+        newest = max((i for i, ev in enumerate(events) if ev[0] == "out" and published_here(ev)), default=-1)
         newest_clock = max((i for i, ev in enumerate(events) if ev[0] == "clock"), default=-1)
         for i, ev in enumerate(events):
             if ev[0] == "cmd":
@@ -646,7 +690,7 @@ class TwinNode:
                 self.stepper.stats.dropped_snapshots += 1
                 continue
             self._live = i == newest
-            if not self._live:
+            if not self._live and (not snap.answered or snap.due or snap.shape_due):
                 self._coalesced += 1
             self._publish(snap)
         self._live = True
