@@ -273,9 +273,12 @@ class _Period:
     hiccups set T̂ 5 % long, the loop's steady phase error crossed the restart bound, and each
     restart moved the targets by v × 5 ms (30 kN).
 
-    The clock restarts on an arrival (a new stream, a pause) when the phase error exceeds
-    ``3 T̂ + 4 × spread`` for ``LATE_RUN`` arrivals in a row, or ``PAUSE`` s plus that bound once:
-    the first late arrival after a hiccup is the head of a backlog that the next ones catch up."""
+    The clock restarts on an arrival (a new stream, a pause, lost samples) when the phase error
+    exceeds ``3 T̂ + 4 × spread`` for ``LATE_RUN`` arrivals in a row that do not catch up (an error
+    not falling by T̂/2 per arrival), or ``PAUSE`` s plus that bound once: the first late arrival
+    after a stall of the sender or the transport is the head of a backlog that the next ones catch
+    up (measured: a Python client that stalled 48 ms sent the 48 commands it owed back to back; a
+    restart there moves the targets by v × 48 ms)."""
 
     WINDOW = 32
     CLOCK_WINDOW = 64
@@ -290,7 +293,8 @@ class _Period:
         self.last = {True: math.nan, False: math.nan}    # stamped → last stamp; else last arrival
         self.arrivals = np.zeros(self.CLOCK_WINDOW)      # ring: arrivals on the current clock
         self.run = 0                                     # arrivals on the current clock
-        self.late = 0                                    # late arrivals in a row
+        self.late = 0                                    # late arrivals in a row, not catching up
+        self.e_prev = 0.0                                # the previous arrival's phase error
         self.tau = math.nan
         self.T_hat = math.nan
 
@@ -313,7 +317,11 @@ class _Period:
             self.T_hat = max(est or 0.0, floor)
         e = t - (self.tau + self.T_hat)
         bound = 3.0 * self.T_hat + 4.0 * spread
-        self.late = self.late + 1 if e > bound else 0
+        # late, and not a backlog catching up (whose arrivals come faster than the clock, so the
+        # error falls by about T̂ per sample)
+        catching_up = e < self.e_prev - 0.5 * self.T_hat
+        self.late = self.late + 1 if (e > bound and not catching_up) else 0
+        self.e_prev = e
         if self.late >= self.LATE_RUN or e > bound + self.PAUSE:
             return est, spread, self._restart(t, est, floor), self.T_hat
         self.tau += self.T_hat + self.BETA * e
@@ -333,6 +341,7 @@ class _Period:
         self.arrivals[0] = t
         self.run = 1
         self.late = 0
+        self.e_prev = 0.0
         self.tau = t
         self.T_hat = max(est or 0.0, floor)
         return t
