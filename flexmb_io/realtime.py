@@ -58,6 +58,24 @@ COMMAND_LEAD = 2
 # publisher and the rest of the machine run (measured: a 50 kHz overloaded twin starved DDS
 # discovery of a client on the 2-core machine)
 BEHIND_PAUSE = 1.0e-4
+# The automatic step margin (``StepperConfig.margin_auto``): an idle step starts early enough for
+# the step's own p99.9 wall time over the last ``window`` steps plus this headroom (s: the host's
+# p99 wake-up lateness, 0.17 ms measured, docs/benchmarks/node.md), never less than the configured
+# margin and at most AUTO_MARGIN_STEPS Δt; re-evaluated every AUTO_MARGIN_EVERY steps. Measured
+# (1 kHz node and player, 3 interleaved 20 s rounds, medians): the 1-element frame-leg twin, whose
+# tangent refreshes take 0.4–0.9 ms, missed 754 of ~21 300 deadlines with the fixed 0.4 ms and
+# 140 with this (0.61–0.65 ms in force); the bar-leg twin 683 and 44 (0.41–0.45 ms); the same
+# command→state latency (README "Deadlines and the host").
+AUTO_MARGIN_HEADROOM = 2.0e-4
+AUTO_MARGIN_STEPS = 4
+AUTO_MARGIN_EVERY = 250
+
+
+def auto_margin(step_p999: float, floor: float, dt: float) -> float:
+    """The idle steps' margin (s) before their deadline for a step whose recent p99.9 wall time is
+    ``step_p999`` (s): that plus :data:`AUTO_MARGIN_HEADROOM`, within [``floor``,
+    max(``floor``, :data:`AUTO_MARGIN_STEPS` × ``dt``)]."""
+    return min(max(floor, step_p999 + AUTO_MARGIN_HEADROOM), max(floor, AUTO_MARGIN_STEPS * dt))
 
 
 def timer_slack(ns: int) -> bool:
@@ -135,7 +153,8 @@ class StepperConfig:
     clock_every: int = 0             # steps between two /clock publications (0: never)
     publish_on_command: bool = True
     max_lag: float = 0.1             # s
-    margin: float = 4.0e-4           # s before a deadline at which an idle step starts
+    margin: float = 4.0e-4           # s before a deadline at which an idle step starts (the least, when auto)
+    margin_auto: bool = False        # widen the margin to the step's own recent wall time (auto_margin)
     duration: float = 0.0            # s of simulated time; 0: until stopped
     capacity: int = 256              # snapshot slots (the publisher may lag this many publications)
     cpu_affinity: tuple[int, ...] = ()
@@ -259,7 +278,8 @@ class Stepper:
         self._lock = threading.Lock()         # a command application and a step exclude each other
         self._pending = 0                     # commands applied since the last step began
         # steps ahead of the wall clock a command may take the twin: COMMAND_LEAD beyond the idle lead
-        self._command_lead = COMMAND_LEAD + int(config.margin // self.dt)
+        self.margin = config.margin           # s, in force (auto_margin may widen it)
+        self._command_lead = COMMAND_LEAD + int(self.margin // self.dt)
         self.wake = threading.Event()
         self._ready = threading.Event()
         self._t0 = 0.0                        # wall time of state 0 (perf_counter; re-anchored on overruns)
@@ -425,9 +445,19 @@ class Stepper:
         d = self.cfg.duration
         return self.stop_event.is_set() or (d > 0 and self.runner.t >= d - 0.5 * self.dt)
 
+    def _update_margin(self) -> None:
+        """The automatic margin from the recent steps' wall time (see :func:`auto_margin`)."""
+        window = min(self.cfg.window, self.step_walls.count)
+        if window < AUTO_MARGIN_EVERY:
+            return
+        p999 = self.step_walls.percentiles((99.9,), last=window)["p99.9"]
+        self.margin = auto_margin(p999, self.cfg.margin, self.dt)
+        self._command_lead = COMMAND_LEAD + int(self.margin // self.dt)
+
     def _loop_realtime(self) -> None:
-        dt, margin = self.dt, self.cfg.margin
+        dt = self.dt
         wake, clock, lock = self.wake, time.perf_counter, self._lock
+        next_update = AUTO_MARGIN_EVERY
         with lock:
             self._t0 = clock()
             self._n = 0
@@ -437,6 +467,10 @@ class Stepper:
                 wake.clear()
                 wake.wait(0.05)        # release() re-anchors the clock and wakes us
                 continue
+            if self.cfg.margin_auto and self._n >= next_update:
+                next_update = self._n + AUTO_MARGIN_EVERY
+                self._update_margin()
+            margin = self.margin
             while True:
                 wake.clear()
                 n = self._n            # a command may have taken this step on its own thread

@@ -320,7 +320,8 @@ class TwinNode:
         # -- the stepping thread (started on activate) -----------------------------------------------
         self.stepper = Stepper(self.runner, StepperConfig(
             mode=self.p.mode, publish_on_command=self.p.publish_on_command, max_lag=self.p.max_lag,
-            margin=self.p.step_margin, duration=self.p.duration, cpu_affinity=_cpus(self.p.cpu_affinity),
+            margin=self.p.step_margin, margin_auto=self.p.step_margin_auto, duration=self.p.duration,
+            cpu_affinity=_cpus(self.p.cpu_affinity),
             rt_priority=self.p.rt_priority, window=max(1, int(round(1.0 / self.dt)))), self._wake_publisher)
         self._set_rates()
         self._prime()
@@ -840,6 +841,7 @@ class TwinNode:
             "sim_time_s": self.runner.t, "wall_time_s": wall, "rtf": self.runner.t / wall,
             "solver_rtf": (self.runner.t / steps_wall) if steps_wall > 0 else math.inf,
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
+            "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
             "newton_iterations": _iterations(self.stepper.iterations),

@@ -50,6 +50,8 @@ def cmd_node(args: argparse.Namespace) -> int:
         values["record"] = args.mcap
     if args.lifecycle:
         values["autostart"] = False
+    if args.fixed_step_margin:
+        values["step_margin_auto"] = False
     summary = run_node(values, node_name=args.name, ros_args=args.ros_args)
     if not args.quiet:
         print(json.dumps(summary, indent=2))
@@ -106,6 +108,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--cpu-affinity", args.cpu_affinity]
     if args.step_margin is not None:
         node_cmd += ["--step-margin", str(args.step_margin)]
+    if args.fixed_step_margin:
+        node_cmd += ["--fixed-step-margin"]
     play_cmd = exe + ["play", args.scene, "--mode", args.mode, "--until", str(args.until), "--json", str(player_json),
                       "--quiet", "--timeout", "120", "--rate", str(args.rate)]
     print(f"flexmb demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, discovery on localhost only; scene {args.scene}, "
@@ -205,7 +209,9 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--rrd", metavar="OUT", help="log to this rerun .rrd file")
     n.add_argument("--summary-json", metavar="OUT", help="write the run summary here on exit")
     n.add_argument("--step-margin", type=float, help="realtime: s before its deadline at which an idle step "
-                   "starts (default 0.0004)")
+                   "starts (default 0.0004; the least margin while step_margin_auto widens it)")
+    n.add_argument("--fixed-step-margin", action="store_true", help="realtime: keep --step-margin as given "
+                   "(step_margin_auto false; default: widened to the step's own p99.5 wall time + 0.2 ms)")
     n.add_argument("--cpu-affinity", help="realtime: CPU ids of the stepping thread, e.g. 1 or 0,1")
     n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread "
                    "(0: normal scheduling; default -1: 20 where the OS allows it)")
@@ -257,6 +263,8 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
     d.add_argument("--step-margin", type=float, help="s before its deadline at which the node's idle step "
                    "starts (the node's step_margin; more than Δt keeps the twin ahead of the wall clock)")
+    d.add_argument("--fixed-step-margin", action="store_true", help="keep the node's step_margin as given "
+                   "(step_margin_auto false)")
     d.add_argument("--out", default="build/demo", help="directory of the JSON summaries")
     d.set_defaults(func=cmd_demo, verb="demo")
     for parser in (n, p, rl, d):

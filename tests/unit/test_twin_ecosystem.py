@@ -230,3 +230,25 @@ def test_a_stalled_publisher_bounds_the_outbox_and_refuses_commands_it_could_not
     st.outbox.clear()
     st.submit("/t", "commands", command, 0.0)
     assert runner.schedule.accepted == 1 and st.outbox[-1][0] == "cmd"
+
+
+def test_the_automatic_step_margin_covers_the_slow_steps_within_its_bounds(stewart):
+    """``auto_margin``: the recent p99.9 step wall time plus the headroom, never under the configured
+    margin, at most AUTO_MARGIN_STEPS Δt (unless the configured margin is larger); a Stepper widens
+    its margin, and the steps a command may lead with it, from its own step times."""
+    from flexmb_io.realtime import AUTO_MARGIN_HEADROOM, AUTO_MARGIN_STEPS, COMMAND_LEAD, auto_margin
+
+    dt = 1e-3
+    assert auto_margin(0.3e-3, 0.4e-3, dt) == pytest.approx(0.3e-3 + AUTO_MARGIN_HEADROOM)
+    assert auto_margin(0.05e-3, 0.4e-3, dt) == 0.4e-3                  # fast steps: the configured margin
+    assert auto_margin(0.05, 0.4e-3, dt) == AUTO_MARGIN_STEPS * dt      # a pathological step: capped
+    assert auto_margin(1e-3, 5e-3, dt) == 5e-3                          # a larger configured margin wins
+    model, _ = stewart
+    runner = TwinRunner(model)
+    runner.start(warmup=False)
+    st = Stepper(runner, StepperConfig(mode="realtime", margin=0.4e-3, margin_auto=True), lambda: None)
+    for k in range(1000):          # 1 % of the steps (tangent refreshes) take 0.9 ms, the others 0.1 ms
+        st.step_walls.add(0.9e-3 if k % 100 == 0 else 0.1e-3)
+    st._update_margin()
+    assert st.margin == pytest.approx(0.9e-3 + AUTO_MARGIN_HEADROOM)
+    assert st._command_lead == COMMAND_LEAD + 1
