@@ -264,14 +264,15 @@ class _Period:
     (a phase-locked loop: the clock moves by a fraction of a µs per sample where the arrivals jitter
     by milliseconds — what the rate and acceleration estimates of the samples need). Its step T̂ is
     the least-squares slope of arrival time against sample count over the last ``CLOCK_WINDOW``
-    arrivals on this clock: a transport that holds samples back and hands them over together (a
-    hiccup, then a burst) moves single intervals, and a mean of intervals with the pauses left out,
-    but not the slope. Measured over DDS before (T̂ the mean of intervals, then moved by γe per
-    sample, γ = β²/4): a 100 Hz stream whose first 18 commands came 1 ms apart left T̂ at 5.2 ms
-    for good, the clock drifted by half a period per sample, and the predicted lines, on a grid
-    half the true spacing, ran the legs to their stroke ends (0.8 MN); at 1 kHz, bursts after
-    hiccups set T̂ 5 % long, the loop's steady phase error crossed the restart bound, and each
-    restart moved the targets by v × 5 ms (30 kN).
+    arrivals on this clock (followed with a gain of ``SMOOTH`` per arrival once half the window is
+    in, so that its wobble does not modulate every rate estimate): a transport that holds samples
+    back and hands them over together (a hiccup, then a burst) moves single intervals, and a mean of
+    intervals with the pauses left out, but not the slope. Measured over DDS before (T̂ the mean of
+    intervals, then moved by γe per sample, γ = β²/4): a 100 Hz stream whose first 18 commands came
+    1 ms apart left T̂ at 5.2 ms for good, the clock drifted by half a period per sample, and the
+    predicted lines, on a grid half the true spacing, ran the legs to their stroke ends (0.8 MN).
+    At 1 kHz neither clock is good enough where commands are lost (9 % in the live runs): an
+    unstamped sample's time is then uncertain by milliseconds (README "Bare streams over real DDS").
 
     The clock restarts on an arrival (a new stream, a pause, lost samples) when the phase error
     exceeds ``3 T̂ + 4 × spread`` for ``LATE_RUN`` arrivals in a row that do not catch up (an error
