@@ -457,7 +457,7 @@ class Stepper:
     def _loop_realtime(self) -> None:
         dt = self.dt
         wake, clock, lock = self.wake, time.perf_counter, self._lock
-        next_update = AUTO_MARGIN_EVERY
+        last_update = 0
         with lock:
             self._t0 = clock()
             self._n = 0
@@ -467,8 +467,9 @@ class Stepper:
                 wake.clear()
                 wake.wait(0.05)        # release() re-anchors the clock and wakes us
                 continue
-            if self.cfg.margin_auto and self._n >= next_update:
-                next_update = self._n + AUTO_MARGIN_EVERY
+            # every AUTO_MARGIN_EVERY steps (and after a reset, which restarts the count)
+            if self.cfg.margin_auto and not 0 <= self._n - last_update < AUTO_MARGIN_EVERY:
+                last_update = self._n
                 self._update_margin()
             margin = self.margin
             while True:

@@ -215,7 +215,7 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--step-margin", type=float, help="realtime: s before its deadline at which an idle step "
                    "starts (default 0.0004; the least margin while step_margin_auto widens it)")
     n.add_argument("--fixed-step-margin", action="store_true", help="realtime: keep --step-margin as given "
-                   "(step_margin_auto false; default: widened to the step's own p99.5 wall time + 0.2 ms)")
+                   "(step_margin_auto false; default: widened to the step's own p99.9 wall time + 0.2 ms)")
     n.add_argument("--cpu-affinity", help="realtime: CPU ids of the stepping thread, e.g. 1 or 0,1")
     n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread "
                    "(0: normal scheduling; default -1: 20 where the OS allows it)")
