@@ -84,18 +84,24 @@ def run_pingpong(seconds: float, rate: float) -> dict:
 
 
 def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float,
-             step_margin: float | None = None) -> dict:
-    """``flexmb demo`` of one case: the node's and the player's summaries, flattened."""
+             step_margin: float | None = None, extra_args: tuple[str, ...] = (), tree: Path = ROOT,
+             label: str = "") -> dict:
+    """``flexmb demo`` of one case: the node's and the player's summaries, flattened. ``extra_args``:
+    more ``flexmb demo`` flags; ``tree``: the checkout whose flexmb runs (another revision, e.g. a
+    ``git worktree``; its own numba cache), with this venv."""
     scene, what = CASES[name]
-    out = ROOT / "build" / "bench_node" / name
+    out = ROOT / "build" / "bench_node" / (name + (f"_{label}" if label else ""))
     cmd = [sys.executable, "-m", "flexmb.cli", "demo", scene, "--mode", "realtime", "--until", str(seconds),
-           "--out", str(out), "--rate", str(rate)]
+           "--out", str(out), "--rate", str(rate), *extra_args]
     if rt_priority is not None:
         cmd += ["--rt-priority", str(rt_priority)]
     if step_margin is not None:
         cmd += ["--step-margin", str(step_margin)]
+    env = _env()
+    if Path(tree).resolve() != ROOT:
+        env.update(PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(Path(tree) / ".cache" / "numba"))
     t0 = time.perf_counter()
-    p = subprocess.run(cmd, env=_env(), cwd=ROOT, capture_output=True, text=True)
+    p = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"{name}: demo failed ({p.returncode}):\n{p.stdout[-3000:]}\n{p.stderr[-3000:]}")
     s = json.loads((out / "summary.json").read_text())
@@ -116,7 +122,8 @@ def run_twin(name: str, seconds: float, rt_priority: int | None, rate: float,
             "cpu_process_s": cpu["process"], "cpu_solver_steps_s": cpu["solver_steps"],
             "cpu_beyond_solver_core": cpu["beyond_solver_core_fraction"],
             "tracking_max_m": pl.get("tracking", {}).get("max_position_error_m"),
-            "failed_steps": n["failed_steps"], "rejected": sum(n["commands_rejected"].values())}
+            "failed_steps": n["failed_steps"], "rejected": sum(n["commands_rejected"].values()),
+            "step_margin_ms": 1e3 * n["step_margin_s"] if "step_margin_s" in n else None}
 
 
 def _median(rows: list[dict], key: str) -> float:

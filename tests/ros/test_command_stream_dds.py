@@ -47,8 +47,8 @@ def _stamp(m) -> float:
 
 @pytest.mark.slow
 @pytest.mark.timeout(240)
-@pytest.mark.xfail(strict=False, reason="not met yet (issue 12): over real DDS the first commands of the stream "
-                   "arrive as a backlog (one per step) and kN-scale leg force peaks follow (measured 2.8–5.8 kN "
+@pytest.mark.xfail(strict=False, reason="not met yet (issue 12): the client's own start-up stall sends its first "
+                   "commands back to back (a backlog), and kN-scale leg force peaks follow (measured 2.8–5.8 kN "
                    "at 100 Hz, settling to 205–268 N after 1.2 s; 5–23 kN at 1 kHz, where the twin also misses "
                    "8–18 % of its deadlines in the first seconds) against 136 N smooth; the offline jittered-"
                    "stream and backlog tests in tests/unit/test_command_hold.py pass")
