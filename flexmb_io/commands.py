@@ -287,6 +287,7 @@ class _Period:
     LATE_RUN = 3
     PAUSE = 0.1
     SMOOTH = 0.05
+    MIN_SLOPE = 3                   # arrivals on a clock before its step is their slope
 
     def __init__(self):
         self.intervals = np.zeros(self.WINDOW)
@@ -314,7 +315,7 @@ class _Period:
             return est, spread, t, max(est or 0.0, floor)
         if self.run == 0:
             return est, spread, self._restart(t, est, floor), self.T_hat
-        if self.run < 3:                  # no slope yet: the mean of the intervals
+        if self.run < self.MIN_SLOPE:     # no slope yet: the mean of the intervals
             self.T_hat = max(est or 0.0, floor)
         e = t - (self.tau + self.T_hat)
         bound = 3.0 * self.T_hat + 4.0 * spread
@@ -330,7 +331,7 @@ class _Period:
         self.arrivals[self.run % cw] = t
         self.run += 1
         m = min(self.run, cw)
-        if m >= 3:
+        if m >= self.MIN_SLOPE:
             slope = _arrival_slope(self.arrivals, m, self.run - 1)
             # followed at a rate of SMOOTH per sample: its wobble would modulate every rate estimate
             k = 1.0 if m < self.CLOCK_WINDOW // 2 else self.SMOOTH

@@ -142,6 +142,11 @@ class Snapshot:
     rejected: int = 0
     newest_stamp: float = 0.0
 
+    @property
+    def answered_only(self) -> bool:
+        """Answered on the command's thread and nothing else due: the publisher only records it."""
+        return self.answered and not (self.due or self.shape_due)
+
 
 @dataclass
 class StepperConfig:

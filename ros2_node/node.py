@@ -587,27 +587,29 @@ class TwinNode:
         else:
             self._warn(f"{topic_name}:{rejection.kind}", str(rejection))
 
-    def _record(self, topic: T.Topic, data, t: float) -> None:
-        """Record serialized bytes published elsewhere (an answer), when recording."""
-        if self.recorder is not None and data is not None:
-            self.recorder.write_cdr(self._resolved(topic), topic.type, data, t)
+    def _record_answer(self, answer: tuple, t: float) -> None:
+        """Record the status and joint states an answer published (their bytes), when recording."""
+        if self.recorder is None:
+            return
+        for topic, data in zip((T.STATUS, T.JOINT_STATES), answer):
+            if data is not None:
+                self.recorder.write_cdr(self._resolved(topic), topic.type, data, t)
 
     def _publish(self, snap: Snapshot) -> None:
         answer = None
         if snap.answered:
             with self._answering:        # its answer is complete (the executor holds this meanwhile)
                 answer = snap.answer
-        full = bool(snap.due or snap.shape_due)
-        if answer is not None and not full:
+        if answer is not None and snap.answered_only:
             # answered and nothing else due: record what the answer published, as it went out
             t = float(snap.state.t)
             self._rtf_window.append((snap.end_wall, t))
-            self._record(T.STATUS, answer[0], t)
-            self._record(T.JOINT_STATES, answer[1], t)
+            self._record_answer(answer, t)
             self._last_sample = snap
             return
         view = self._view
         view.state, view.last = snap.state, snap.result if snap.result is not None else view.last
+        full = bool(snap.due or snap.shape_due)
         s = self._reporter.read(view, full)
         if full:
             self._shells.read(snap.state.q)
@@ -625,8 +627,7 @@ class TwinNode:
         if answer is not None:
             # answered on the command's thread and also due: the answer went out already, its
             # bytes are what is recorded (and not published a second time)
-            self._record(T.STATUS, answer[0], t)
-            self._record(T.JOINT_STATES, answer[1], t)
+            self._record_answer(answer, t)
         else:
             # a snapshot answered on the command's thread is only recorded here (unless also due)
             live_now = self._live
@@ -670,12 +671,9 @@ class TwinNode:
             events.append(out.popleft())
         slots = self.stepper.slots
 
-        def published_here(ev) -> bool:
-            # a state this thread publishes (an answered one only is recorded, unless also due)
-            snap = slots[ev[1]]
-            return snap.seq == ev[2] and (not snap.answered or snap.due or snap.shape_due)
-
-        newest = max((i for i, ev in enumerate(events) if ev[0] == "out" and published_here(ev)), default=-1)
+        # the newest state this thread publishes (an answered one only is recorded, unless also due)
+        newest = max((i for i, ev in enumerate(events) if ev[0] == "out" and slots[ev[1]].seq == ev[2]
+                      and not slots[ev[1]].answered_only), default=-1)
         newest_clock = max((i for i, ev in enumerate(events) if ev[0] == "clock"), default=-1)
         for i, ev in enumerate(events):
             if ev[0] == "cmd":
@@ -691,7 +689,7 @@ class TwinNode:
                 self.stepper.stats.dropped_snapshots += 1
                 continue
             self._live = i == newest
-            if not self._live and (not snap.answered or snap.due or snap.shape_due):
+            if not self._live and not snap.answered_only:
                 self._coalesced += 1
             self._publish(snap)
         self._live = True
