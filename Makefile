@@ -29,7 +29,9 @@ TF2_MSGS_SRC := $(call interface_src,ros/tf2_msgs)
 
 # The Stewart twin end to end: the node and the command player as two processes on DDS (real
 # time, Δt = 1 ms, the 20 s appendix trajectory), recorded to MCAP, then shown in rerun (an .rrd).
-DEMO_SCENE ?= scenes/stewart_platform_bars.yaml
+# Flexible frame legs (1 cubic element each) on the truss platform; the bar-leg twin:
+# make demo DEMO_SCENE=scenes/stewart_platform_bars.yaml
+DEMO_SCENE ?= scenes/stewart_platform_1el_truss.yaml
 DEMO_CMD ?= $(VENV)/bin/flexmb demo $(DEMO_SCENE) --mcap build/demo/bag --out build/demo \
 	&& $(VENV)/bin/flexmb view build/demo/bag --rrd build/demo/stewart.rrd
 PYTEST_ARGS ?=

@@ -101,6 +101,7 @@ def _python_path_as_before(sim: Simulator) -> None:
     integ.fast = None
     sim.ws.frame_structure = [frame_structure(g, structured=False) for g in sim.model.frame_groups]
     integ._mass = sim.model.mass_csr
+    integ._mass_blocks = (1, *sim.model.mass_csr)
 
 
 def _profile_python(model, until: float) -> tuple[dict, float, dict]:
@@ -204,11 +205,11 @@ def _component_costs(model) -> dict:
             frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam, lr, 0.0, smap, want_k, False, r, kd, *sc)
 
     @njit
-    def rep_ir(k, q, qh, at, an, vn, mi, mj, mv, r, f, free, wb, rf, gp):
+    def rep_ir(k, q, qh, at, an, vn, mb, mi, mj, mv, r, f, free_pos, wb, rf, gp):
         s = 0.0
         for _ in range(k):
-            s += inertial_residual(q, qh, at, an, vn, 1e6, 0.1, 0.2, 0.6, 1e-3, 10.0, mi, mj, mv, r, f, free, wb, rf,
-                                   False, gp)[0]
+            s += inertial_residual(q, qh, at, an, vn, 1e6, 0.1, 0.2, 0.6, 1e-3, 10.0, mb, mi, mj, mv, r, f, free_pos,
+                                   wb, rf, False, gp)[0]
         return s
 
     @njit
@@ -222,10 +223,10 @@ def _component_costs(model) -> dict:
             _factor_kernel(kd, mk, coef, slot, acc, zs, base, a, b, c, d, e, f, blk, env, idg, ptol, stats, 0)
 
     @njit
-    def rep_en(k, mi, mj, mv, v, q, q0, gr):
+    def rep_en(k, mb, mi, mj, mv, v, q, q0, gr):
         s = 0.0
         for _ in range(k):
-            s += _energies(mi, mj, mv, v, q, q0, gr)[0]
+            s += _energies(mb, mi, mj, mv, v, q, q0, gr)[0]
         return s
 
     def best(f, *a, k=500):
@@ -242,14 +243,14 @@ def _component_costs(model) -> dict:
     iv, sky = integ._ivec, integ.lu.skyline
     out = {"element kernels, residual": best(rep_fg, False, *ga),
            "element kernels, residual + tangent": best(rep_fg, True, *ga, k=100),
-           "inertial residual M(a + c_m v)": best(rep_ir, q, iv[4], iv[3], iv[2], iv[1], *integ._mass, ws.r, ws.f_ext,
-                                                  m.free, integ._w, integ._rf, iv[6]),
+           "inertial residual M(a + c_m v)": best(rep_ir, q, iv[4], iv[3], iv[2], iv[1], *integ._mass_blocks, ws.r,
+                                                  ws.f_ext, m.free_index, integ._w, integ._rf, iv[6]),
            "LU solve": best(rep_solve, integ._rf, sky.perm, sky._base, *sky._lrun, *sky._urun, sky._env,
                             sky._inv_diag, sky._work, np.zeros(m.nsys)),
            "LU factor": best(rep_factor, ws.kdata, sky._writable(m.mass_kdata), 1e6, sky._slot, sky._accumulate,
                              sky._zero_slots, sky._base, *sky._lrun, *sky._urun, sky._blk_ptr, sky._env, sky._inv_diag,
                              sky.pivot_tol, sky._stats, k=100),
-           "energies": best(rep_en, *integ._mass, sim.state.v, q, m.q0, m.gravity_vector)}
+           "energies": best(rep_en, *integ._mass_blocks, sim.state.v, q, m.q0, m.gravity_vector)}
     return out
 
 

@@ -38,6 +38,7 @@ DOCS = ROOT / "docs" / "benchmarks"
 CASES = {
     "bars": ("scenes/stewart_platform_bars.yaml", "bar-actuator legs, truss platform (9 free DOFs)"),
     "frame1": ("scenes/stewart_platform_1el.yaml", "frame legs, 1 cubic element each"),
+    "frame1t": ("scenes/stewart_platform_1el_truss.yaml", "frame legs, 1 cubic element each, truss platform"),
     "frame4": ("scenes/stewart_platform.yaml", "frame legs, 4 cubic elements each (the paper's fidelity)"),
 }
 # the targets: p99 ≤ 1 ms and ≤ the ping-pong's p99 + 0.3 ms; node CPU ≤ solver + 15 % core

@@ -7,7 +7,9 @@ scenes/stewart_platform.yaml (frame-actuator legs, cubic elements, frame platfor
 scenes/stewart_platform_bars.yaml (one bar actuator per leg, truss platform), edited in memory.
 
   A. the twin ladder at the scenes' settings (Newton tolerance 1e-8): bar legs at Δt = 4, 2, 1 ms;
-     frame legs with 1, 2, 4, 8 cubic elements at 1 ms; 4 elements at 4, 2, 0.5 ms. Timed.
+     frame legs with 1, 2, 4, 8 cubic elements at 1 ms; 4 elements at 4, 2, 0.5 ms; frame legs (1, 4
+     elements) on a truss platform (the platform edges as bars: a rigid triangle for the legs' ball
+     joints, the class of Exudyn's rigid platform) at 1 ms. Timed.
   R. the converged reference: 8 elements, Δt = 0.25 ms, Newton tolerance 1e-11.
   B. convergence in Δt (tolerance 1e-11; 1e-12 for the bar legs): 4 elements at Δt = 4 … 0.25 ms,
      bar legs at 4 … 0.125 ms.
@@ -16,6 +18,9 @@ scenes/stewart_platform_bars.yaml (one bar actuator per leg, truss platform), ed
      with and without the material damping, bar legs (20 s) and 4-element frame legs (to 12 s).
   P. peer (when installed): Exudyn's flexible Stewart platform in the same process
      (benchmarks/peers/exudyn_stewart.py).
+  H. head to head with the peer, interleaved (``--rounds``, default 5): per round one run each of
+     flexmb's frame legs (1 and 4 elements; frame and truss platform) and Exudyn's ANCF legs (1 and
+     4 elements); medians of steps/s and of the per-round ratios to Exudyn at the same leg mesh.
 
 Every run records the platform pose (centroid; quaternion from nodes A, B, C) and the six leg forces
 (elastic + viscous) at the 10 ms marks (20 ms for Δt = 4 ms): comparisons are at identical times,
@@ -37,6 +42,7 @@ import math
 import os
 import platform
 import subprocess
+import statistics
 import sys
 import tempfile
 import time
@@ -61,6 +67,7 @@ FRAME_SCENE = ROOT / "scenes" / "stewart_platform.yaml"
 BARS_SCENE = ROOT / "scenes" / "stewart_platform_bars.yaml"
 PLATFORM = ("A", "B", "C")
 LEGS = [f"leg{i}" for i in range(1, 7)]
+EDGES = ("edge_ab", "edge_bc", "edge_ca")
 MARK = 0.01                     # sampling interval (s)
 REPEAT_BELOW_S = 30.0           # timed runs are repeated until their walls sum to this …
 MAX_REPEATS = 3                 # … at most this often; the fastest repeat counts
@@ -74,9 +81,13 @@ METRICS = ("position_m", "orientation_rad", "leg_force_N")
 
 # -- variants -------------------------------------------------------------------------------------
 def _v(kind: str, elements: int, dt: float, tol: float | None = None, **extra) -> dict:
+    """A variant: ``kind`` "bars" (bar legs, truss platform), "frame" (frame legs, frame platform)
+    or "frame_tp" (frame legs, truss platform)."""
     tag = "" if tol is None else "_tight"
-    key = (f"bars_dt{dt * 1e3:g}" if kind == "bars" else f"frame{elements}_dt{dt * 1e3:g}") + tag
-    label = "bar legs + truss platform" if kind == "bars" else f"frame legs, {elements} cubic el./leg"
+    key = {"bars": f"bars_dt{dt * 1e3:g}", "frame": f"frame{elements}_dt{dt * 1e3:g}",
+           "frame_tp": f"frame{elements}tp_dt{dt * 1e3:g}"}[kind] + tag
+    label = {"bars": "bar legs + truss platform", "frame": f"frame legs, {elements} cubic el./leg",
+             "frame_tp": f"frame legs, {elements} cubic el./leg + truss platform"}[kind]
     v = {"key": key, "kind": kind, "elements": elements, "dt": dt, "label": label}
     if tol is not None:
         v["tolerance"] = tol
@@ -88,16 +99,22 @@ def twin_variants() -> list[dict]:
     """A: what the twin runs (scene tolerance), timed."""
     return ([_v("bars", 1, dt) for dt in (4e-3, 2e-3, 1e-3)]
             + [_v("frame", n, 1e-3) for n in (1, 2, 4, 8)]
-            + [_v("frame", 4, dt) for dt in (4e-3, 2e-3, 5e-4)])
+            + [_v("frame", 4, dt) for dt in (4e-3, 2e-3, 5e-4)]
+            + [_v("frame_tp", n, 1e-3) for n in (1, 4)])
 
 
 def scene_dict(v: dict, until: float) -> dict:
     """Scene dict of one variant: the YAML parsed, deep-copied (anchors share dicts), then edited."""
     path = BARS_SCENE if v["kind"] == "bars" else FRAME_SCENE
     data = copy.deepcopy(parse_yaml(path.read_text()))
-    if v["kind"] == "frame":
+    if v["kind"] in ("frame", "frame_tp"):
         for leg in LEGS:
             data["members"][leg] = dict(data["members"][leg], elements=v["elements"])
+    if v["kind"] == "frame_tp":      # the bar-leg scene's platform: three pin-jointed steel tubes
+        for edge in EDGES:
+            m = data["members"][edge]
+            data["members"][edge] = {"kind": "truss", "from": m["from"], "to": m["to"], "material": m["material"],
+                                     "section": m["section"]}
     if "eta" in v:
         data["materials"]["steel"] = dict(data["materials"]["steel"], eta=v["eta"])
     if "commands" in v:
@@ -383,9 +400,9 @@ def write_plot(rows, ref, conv, hist, path: Path) -> bool:
         if not r.get("completed"):
             continue
         y = r["vs_reference"]["position_m"]
-        marker = "s" if r["kind"] == "bars" else ("o" if r["dt"] == 1e-3 else "^")
+        marker = "s" if r["kind"] == "bars" else ("D" if r["kind"] == "frame_tp" else ("o" if r["dt"] == 1e-3 else "^"))
         ax.loglog(r["wall_per_sim_s"], y, marker, ms=7)
-        name = "bars" if r["kind"] == "bars" else f"{r['elements']} el"
+        name = "bars" if r["kind"] == "bars" else f"{r['elements']} el" + (" + truss pl." if r["kind"] == "frame_tp" else "")
         ax.annotate(f"{name}, {r['dt'] * 1e3:g} ms", (r["wall_per_sim_s"], y), fontsize=7, xytext=(4, 3),
                     textcoords="offset points")
     ax.axvline(1.0, color="k", lw=0.8, ls="--")
@@ -445,7 +462,7 @@ def _ladder_table(c: dict, xname: str, xs: list[str]) -> list[str]:
 
 
 def write_markdown(path: Path, rows, ref, conv, cheapest, cheapest_1ms, transient, modes, peers, meta,
-                   plotted) -> None:
+                   plotted, h2h=(), rounds: int = 0) -> None:
     T = meta["sim_time_s"]
     sv = meta["solver"]
     eta = meta["eta_Pa_s"]
@@ -596,6 +613,8 @@ def write_markdown(path: Path, rows, ref, conv, cheapest, cheapest_1ms, transien
                       "stiffer edges moves by 6e-8 m) and the actuator stiffness law (Exudyn legs with EA/λ instead of EA: "
                       "the same 4.2e-6 m). Exudyn's cost is dominated by the per-step Python update (compare the run "
                       "without it) and 5–6 Newton iterations per step.", ""]
+    if h2h:
+        lines += _head_to_head_lines(h2h, rounds, rows)
     if plotted:
         lines += ["![Stewart twin](stewart.png)", "",
                   "Left: work-precision — deviation from the converged reference over 0–20 s against wall time per "
@@ -603,6 +622,26 @@ def write_markdown(path: Path, rows, ref, conv, cheapest, cheapest_1ms, transien
                   "line meets the RTF ≥ 20 goal, below the red line the 1e-4 m goal. Middle: Δt convergence over 0–20 s. "
                   "Right: leg-1 force of the bar-leg twin around the switch.", ""]
     path.write_text("\n".join(lines) + "\n")
+
+
+def _head_to_head_lines(h2h: list[dict], rounds: int, rows: list[dict]) -> list[str]:
+    """Section H of stewart.md: the interleaved runs against Exudyn."""
+    dev = {r["key"]: r["vs_reference"] for r in rows if r.get("completed") and "vs_reference" in r}
+    lines = [f"## H. Head to head with Exudyn, interleaved ({rounds} rounds)", "",
+             "Each round runs every case below once, in turn, over the same trajectory (Δt = 1 ms, commands every "
+             "step); the table gives medians over the rounds, of steps/s and of the ratio to Exudyn's ANCF legs at the "
+             "same leg mesh *in the same round*, so the machine's drift cancels. Exudyn's platform is one rigid body; "
+             "flexmb's truss platform (the bar-leg twin's three pin-jointed steel tubes) is its class — a rigid "
+             "triangle for the legs' ball joints, the edges' mass and inertia — while the frame platform adds the "
+             "edges' own bending (6 more cubic elements, 171 more DOFs).", "",
+             "| case | steps/s (median) | RTF | ratio to Exudyn, same leg mesh (median of rounds) | pose dev. vs reference (m, section A) |",
+             "|---|---|---|---|---|"]
+    for h in h2h:
+        d = dev.get(h["key"] + "_dt1")
+        lines.append(f"| {h['label']} | {h['steps_per_s']:.0f} | {h['rtf']:.2f} | {h['ratio_to_exudyn_same_mesh']:.2f} | "
+                     + (f"{d['position_m']:.1e}" if d else "–") + " |")
+    lines.append("")
+    return lines
 
 
 def excitation_facts() -> dict:
@@ -642,6 +681,45 @@ def run_peers(rows: list[dict], ref: dict, until: float) -> list[dict]:
     return peers
 
 
+H2H_ELEMENTS = (1, 4)       # leg meshes of the head-to-head (H)
+
+
+def head_to_head(rounds: int, until: float) -> list[dict]:
+    """H: per round one run of each flexmb frame-leg variant (frame and truss platform) and of
+    Exudyn's ANCF legs, at 1 and 4 elements per leg, in turn (Δt = 1 ms, commands every step);
+    medians over the rounds of steps/s and of the ratio to Exudyn at the same leg mesh in that
+    round. Empty when the peer is not installed."""
+    try:
+        from peers import exudyn_stewart
+    except ImportError:
+        return []
+    if not exudyn_stewart.available():
+        return []
+    cases = []
+    for n in H2H_ELEMENTS:
+        cases += [(f"frame{n}", n, lambda n=n: run_variant(_v("frame", n, 1e-3), until, repeat=False)),
+                  (f"frame{n}tp", n, lambda n=n: run_variant(_v("frame_tp", n, 1e-3), until, repeat=False)),
+                  (f"ancf{n}", n, lambda n=n: exudyn_stewart.run(f"ancf{n}", 1e-3, until=until))]
+    speed: dict[str, list[float]] = {key: [] for key, _, _ in cases}
+    ratio: dict[str, list[float]] = {key: [] for key, _, _ in cases}
+    label: dict[str, str] = {}
+    for rnd in range(rounds):
+        got = {}
+        for key, _, run in cases:
+            r = run()
+            got[key] = r["steps_per_s"]
+            label[key] = r["label"]
+        for key, n, _ in cases:
+            speed[key].append(got[key])
+            ratio[key].append(got[key] / got[f"ancf{n}"])
+        print(f"head to head, round {rnd + 1}/{rounds}: "
+              + ", ".join(f"{key} {got[key]:.0f}" for key, _, _ in cases) + " steps/s", flush=True)
+    return [{"key": key, "label": label[key], "elements_per_leg": n, "code": "exudyn" if key.startswith("ancf") else "flexmb",
+             "steps_per_s": statistics.median(speed[key]), "rtf": statistics.median(speed[key]) * 1e-3,
+             "ratio_to_exudyn_same_mesh": statistics.median(ratio[key]), "steps_per_s_rounds": speed[key],
+             "ratios_rounds": ratio[key]} for key, n, _ in cases]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="simulate 3 s instead of 20 s (smoke run)")
@@ -649,7 +727,8 @@ def main() -> int:
     ap.add_argument("--out", default=None,
                     help="output directory (default docs/benchmarks; with --quick a temporary directory)")
     ap.add_argument("--no-plot", action="store_true")
-    ap.add_argument("--no-peer", action="store_true", help="skip the Exudyn peer")
+    ap.add_argument("--no-peer", action="store_true", help="skip the Exudyn peer (P and H)")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of the interleaved head to head (H); 0 skips it")
     ap.add_argument("--render-only", action="store_true",
                     help="rewrite stewart.md from the stewart.json of --out (no simulation; the figure is kept)")
     args = ap.parse_args()
@@ -658,7 +737,7 @@ def main() -> int:
         j = json.loads((out_dir / "stewart.json").read_text())
         write_markdown(out_dir / "stewart.md", j["variants"], j["reference"], j["convergence"], j["cheapest_within"],
                        j["cheapest_within_at_1ms"], j["switch_transient"], j["meta"]["modes"], j["peers"], j["meta"],
-                       (out_dir / "stewart.png").exists())
+                       (out_dir / "stewart.png").exists(), j.get("head_to_head", []), j.get("head_to_head_rounds", 0))
         print(f"wrote {out_dir / 'stewart.md'}")
         return 0
     until = args.until if args.until is not None else (3.0 if args.quick else 20.0)
@@ -696,6 +775,7 @@ def main() -> int:
     transient, hist = switch_transient(args.quick)
     modes = modal_damping()
     peers = [] if args.no_peer else run_peers(rows, ref, until)
+    h2h = [] if args.no_peer or args.rounds < 1 else head_to_head(args.rounds, until)
 
     cheapest, cheapest_1ms = {}, {}
     for tol in TOLERANCES:
@@ -728,10 +808,10 @@ def main() -> int:
         "meta": meta, "variants": public(rows), "reference": public([ref])[0],
         "convergence_runs": public(frame_dt + bars_dt + mesh[:2] + [mesh_ref]), "convergence": conv,
         "cheapest_within": cheapest, "cheapest_within_at_1ms": cheapest_1ms, "switch_transient": transient,
-        "peers": peers}, indent=2) + "\n")
+        "peers": peers, "head_to_head": h2h, "head_to_head_rounds": args.rounds}, indent=2) + "\n")
     plotted = (not args.no_plot) and write_plot(rows, ref, conv, hist, out_dir / "stewart.png")
     write_markdown(out_dir / "stewart.md", rows, ref, conv, cheapest, cheapest_1ms, transient, modes, peers, meta,
-                   plotted)
+                   plotted, h2h, args.rounds)
     print(f"total {total:.0f} s; wrote {out_dir / 'stewart.md'} and {out_dir / 'stewart.json'}"
           + (f" and {out_dir / 'stewart.png'}" if plotted else ""))
     return 0 if all(r["completed"] for r in rows) else 2

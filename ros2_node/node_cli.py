@@ -256,7 +256,8 @@ def register(verbs, run_parser) -> None:
     rl.set_defaults(func=cmd_replay_live, verb="replay-live")
 
     d = verbs.add_parser("demo", help="twin node + player as two processes on DDS, with a summary")
-    d.add_argument("scene", nargs="?", default="scenes/stewart_platform.yaml")
+    d.add_argument("scene", nargs="?", default="scenes/stewart_platform_1el_truss.yaml",
+                   help="scene file (default: the flexible-leg twin of `make demo`)")
     d.add_argument("--mode", choices=("realtime", "lockstep"), default="realtime")
     d.add_argument("--until", type=float, default=20.0)
     d.add_argument("--publish-rate", type=float)

@@ -37,9 +37,9 @@ from ..solvers.guard import StepGuard
 from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
-from .energy import compact_csr, csr_matvec, energies
+from .energy import compact_csr, csr_matvec, energies, mass_blocks
 from .fast import NumbaStep
-from .fused import apply_increment, inertial_residual, stretch_rate, update_rates, velocity_at
+from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
 
 
 def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
@@ -68,6 +68,7 @@ class DynamicIntegrator:
         n = model.ndof
         self._ma = np.zeros(n)
         self._mass = compact_csr(*model.mass_csr)   # M without its stored zeros (same products)
+        self._mass_blocks = mass_blocks(*self._mass)  # … and as M_s ⊗ I₃ where it is (same sums)
         self._backup = None
         self._free = model.free
         self._inv_scale = 1.0 / model.dof_scale[model.free]
@@ -170,7 +171,7 @@ class DynamicIntegrator:
             state.a[self._free] = sol[:self._nf]
             state.mult[:] = sol[self._nf:]
         state.atil[:] = state.a
-        kin, grav = energies(m, state, self._mass)
+        kin, grav = energies(m, state, self._mass_blocks)
         self.guard.ledger_start(state.t, kin, strain, ws.f_ext, ws.r, state.q, state.a, state.v)
         return StepResult(True, 0, 0.0, 0.0, 1, kin, strain, grav)
 
@@ -212,17 +213,15 @@ class DynamicIntegrator:
         """λ_{n+1} into ``state.lam`` and, for damped models, its rate λ̇_{n+1} into
         ``state.lam_rate`` (given, or the backward difference over the stretch history); λ_n is
         kept as the history's candidate. Returns whether any actuator moves in the step."""
-        if self._damped:
-            if lam_rate is None:
-                t_n = state.t
-                h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
-                stretch_rate(lam_new, state.lam, self._lam_hist, dt, h0, state.lam_rate)
-            else:
-                state.lam_rate[:] = lam_rate
-            self._lam_cand[:] = state.lam
-        moved = lam_new.size > 0 and bool(np.any(lam_new != state.lam))
-        state.lam[:] = lam_new
-        return moved
+        difference = self._damped and lam_rate is None
+        h0 = 0.0
+        if difference:
+            t_n = state.t
+            h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
+        elif self._damped:
+            state.lam_rate[:] = lam_rate
+        return advance_stretches(lam_new, state.lam, self._lam_hist, self._lam_cand, state.lam_rate, dt, h0,
+                                 difference, self._damped)
 
     def accept_stretches(self, t_n: float, t_new: float) -> None:
         """The step t_n → t_new was accepted: λ_n joins the stretch history (damped models)."""
@@ -293,7 +292,7 @@ class DynamicIntegrator:
         refresh = (not modified or self._factored_coef != coef
                    or self._tangent_age >= spec.tangent_max_age)
         prev_inc = math.inf
-        mi, mj, mv = self._mass
+        mb, mi, mj, mv = self._mass_blocks
         for it in range(1, spec.max_iterations + 1):
             if ch:
                 np.multiply(q, 1.0 - af, out=q_eval)
@@ -306,7 +305,8 @@ class DynamicIntegrator:
                 strain = assemble(m, ws, q_eval, state.lam, refresh, state.mult)
             keep = it == 1 and guarded
             nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am_r, af_r, gamma, dt, c_m,
-                                        mi, mj, mv, ws.r, ws.f_ext, free, self._w, self._rf, keep, self._g_p)
+                                        mb, mi, mj, mv, ws.r, ws.f_ext, m.free_index, self._w, self._rf, keep,
+                                        self._g_p)
             rel = nr / ref
             if keep:
                 u_p = strain
@@ -354,7 +354,7 @@ class DynamicIntegrator:
         state.t = t_new
         guard = ""
         if converged and guarded:
-            kin, grav = energies(m, state, self._mass)
+            kin, grav = energies(m, state, self._mass_blocks)
             guard, why = self.guard.dynamic(self, state, dq, self._rf, self._c_p, c_v, af if ch else 0.0, u_p,
                                             strain, diss_p, kin, t_n, not ch and not lam_moved)
             if guard:
@@ -373,5 +373,5 @@ class DynamicIntegrator:
         if guarded:
             self.guard.ledger_accept(t_new)
         else:
-            kin, grav = energies(m, state, self._mass)
+            kin, grav = energies(m, state, self._mass_blocks)
         return StepResult(True, it, rel, inc, 1, kin, strain, grav)

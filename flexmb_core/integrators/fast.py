@@ -34,13 +34,13 @@ from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies
 from .fused import apply_increment, inertial_residual, update_rates, velocity_at
-from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BLK, L_CP, L_DQ, L_DRIVE, L_DRVIDX,
-                    L_DRVVAL, L_DSCALE, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA, L_LRH, L_LRL, L_LRP,
-                    L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0, L_QL, L_RC, L_RF,
-                    L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZSLOT, N_PAR, NF, P_AF, P_AM, P_BAL, P_BETA,
-                    P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA, P_KEEP, P_MAXAGE, P_MAXIT, P_MINPIV,
-                    P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, P_ACCUM, ModelPacks,
-                    assemble_packed, moment_work_packed, unknown_fields, view1, view2)
+from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
+                    L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
+                    L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
+                    L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZSLOT, NF, N_PAR, P_ACCUM, P_AF,
+                    P_AM, P_BAL, P_BETA, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA, P_KEEP, P_MAXAGE,
+                    P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL,
+                    ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1, view2)
 
 # Return codes of model_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
@@ -80,6 +80,11 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     m_indptr = view1(ci, lay[L_MI])
     m_indices = view1(ci, lay[L_MJ])
     m_data = view1(cf, lay[L_MV])
+    mb = int(par[P_MBLOCK])                 # M in block form for the products (packs.mass_blocks)
+    b_indptr = view1(ci, lay[L_BI])
+    b_indices = view1(ci, lay[L_BJ])
+    b_data = view1(cf, lay[L_BV])
+    free_pos = view1(ci, lay[L_FPOS])
     ivec = view2(wf, lay[L_IVEC])
     rf = view1(wf, lay[L_RF])
     dq = view1(wf, lay[L_DQ])
@@ -168,8 +173,8 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
         strain, diss = assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci, wf, wi,
                                  lay, par)
         keep = it == 1 and guarded
-        nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
-                                    m_indptr, m_indices, m_data, r, f_ext, free, view1(wf, lay[L_WBUF]), rf, keep, g_p)
+        nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m, mb, b_indptr,
+                                    b_indices, b_data, r, f_ext, free_pos, view1(wf, lay[L_WBUF]), rf, keep, g_p)
         rel = nr / ref
         if keep:
             u_p = strain
@@ -215,7 +220,7 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     kin = 0.0
     grav = 0.0
     if code == OK:
-        kin, grav = _energies(m_indptr, m_indices, m_data, v, q, view1(cf, lay[L_Q0]), view1(cf, lay[L_GRAV]))
+        kin, grav = _energies(mb, b_indptr, b_indices, b_data, v, q, view1(cf, lay[L_Q0]), view1(cf, lay[L_GRAV]))
     # -- the step guard ------------------------------------------------------------------------------
     if code == OK and guarded:
         for k in range(nfg):

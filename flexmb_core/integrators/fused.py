@@ -9,12 +9,14 @@ from numba import njit
 
 @njit(cache=True)
 def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
-                      m_indptr, m_indices, m_data, r_int, f_ext, free, w_buf, rf, keep, g_out):
+                      mb, m_indptr, m_indices, m_data, r_int, f_ext, free_pos, w_buf, rf, keep, g_out):
     """Free part of ``r = f_int + M (a + c_m v) − f_ext`` with a, v from the integrator formulas.
 
-    ``c_tilde = 1/(βΔt²)``; ``w_buf (ndof,)`` scratch; ``rf (nfree,)`` out. With ``keep`` the
-    inertial minus external part ``M (a + c_m v) − f_ext`` also goes to ``g_out`` (first nfree
-    entries), which the step guard reads at the Newton start.
+    ``c_tilde = 1/(βΔt²)``; ``mb, m_indptr, m_indices, m_data``: M in block form
+    (:func:`~flexmb_core.integrators.energy.mass_blocks`, block size 1 or 3); ``free_pos (ndof,)``
+    each DOF's position among the free ones or −1; ``w_buf (ndof,)`` scratch; ``rf (nfree,)`` out.
+    With ``keep`` the inertial minus external part ``M (a + c_m v) − f_ext`` also goes to
+    ``g_out`` (first nfree entries), which the step guard reads at the Newton start.
     Returns (‖rf‖, reference force ‖·‖ = max(‖f_int‖, ‖M(a + c_m v)‖, ‖f_ext‖) over free DOFs).
     """
     n = q.size
@@ -23,23 +25,39 @@ def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
         a = ((1.0 - am) * atil + am * at_n[i] - af * a_n[i]) / (1.0 - af)
         v = v_n[i] + dt * ((1.0 - gamma) * at_n[i] + gamma * atil)
         w_buf[i] = a + c_m * v
-    nr = 0.0
+    nr = 0.0                # ‖r‖², ‖f_int‖², ‖M w‖², ‖f_ext‖² over the free rows, in row order
     ni = 0.0
     nm = 0.0
     ne = 0.0
-    for k in range(free.size):
-        i = free[k]
-        s = 0.0
-        for j in range(m_indptr[i], m_indptr[i + 1]):
-            s += m_data[j] * w_buf[m_indices[j]]
-        r = r_int[i] + s - f_ext[i]
-        rf[k] = r
-        if keep:
-            g_out[k] = s - f_ext[i]
-        nr += r * r
-        ni += r_int[i] * r_int[i]
-        nm += s * s
-        ne += f_ext[i] * f_ext[i]
+    for b in range(m_indptr.size - 1):
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        if mb == 3:             # rows 3b, 3b+1, 3b+2 from one pass over block row b
+            for k in range(m_indptr[b], m_indptr[b + 1]):
+                j = 3 * m_indices[k]
+                d = m_data[k]
+                s0 += d * w_buf[j]
+                s1 += d * w_buf[j + 1]
+                s2 += d * w_buf[j + 2]
+        elif free_pos[b] >= 0:
+            for k in range(m_indptr[b], m_indptr[b + 1]):
+                s0 += m_data[k] * w_buf[m_indices[k]]
+        # (the free rows inline: a helper called per row costs more than the row's product)
+        for t in range(mb):
+            i = mb * b + t
+            row = free_pos[i]
+            if row < 0:
+                continue
+            s = s0 if t == 0 else (s1 if t == 1 else s2)
+            r = r_int[i] + s - f_ext[i]
+            rf[row] = r
+            if keep:
+                g_out[row] = s - f_ext[i]
+            nr += r * r
+            ni += r_int[i] * r_int[i]
+            nm += s * s
+            ne += f_ext[i] * f_ext[i]
     return math.sqrt(nr), max(math.sqrt(ni), math.sqrt(nm), math.sqrt(ne), 1e-300)
 
 
@@ -91,3 +109,24 @@ def stretch_rate(lam_new, lam_n, lam_prev, h1, h0, out):
     else:
         for i in range(out.size):
             out[i] = (lam_new[i] - lam_n[i]) / h1
+
+
+@njit(cache=True)
+def advance_stretches(lam_new, lam, lam_prev, lam_cand, rate, h1, h0, difference, damped):
+    """λ_{n+1} into ``lam (na,)``, which holds λ_n on entry; returns whether any actuator moves.
+
+    With ``difference`` the rate λ̇_{n+1} goes to ``rate (na,)`` by :func:`stretch_rate` over
+    (``lam_prev``, λ_n, ``lam_new``); with ``damped`` λ_n is kept in ``lam_cand (na,)``, the
+    stretch history's candidate. One call in place of four numpy operations: at 1 kHz the
+    Python around a numba step is a measurable part of it (docs/benchmarks/stewart.md).
+    """
+    if difference:
+        stretch_rate(lam_new, lam, lam_prev, h1, h0, rate)
+    moved = False
+    for i in range(lam.size):
+        if damped:
+            lam_cand[i] = lam[i]
+        if lam_new[i] != lam[i]:
+            moved = True
+        lam[i] = lam_new[i]
+    return moved

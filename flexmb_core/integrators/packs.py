@@ -29,17 +29,18 @@ from ..kernels.shell import shell_group, shell_scratch
 from ..kernels.truss import truss_group
 from ..model.assembly import apply_drives
 from ..model.model import Model, TrussGroup
+from .energy import mass_blocks
 
 # Items of the whole model (rows of the layout table).
 (L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
- L_FMBODY, L_CAXES, L_CMAG,                                                                   # cf
+ L_FMBODY, L_CAXES, L_CMAG, L_BV,                                                             # cf
  L_FREE, L_MI, L_MJ, L_TEDOFS, L_TACT, L_TSMAP, L_CDOFS, L_CSMAP, L_HDOFS, L_HSMAP, L_TIEDOFS, L_TIESMAP,
- L_FVDOFS, L_FSMAP, L_MVDOFS, L_MSMAP, L_DRVIDX,                                              # ci
+ L_FVDOFS, L_FSMAP, L_MVDOFS, L_MSMAP, L_DRVIDX, L_BI, L_BJ, L_FPOS,                          # ci
  L_INVS, L_MASSK, L_VEVAL, L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK, L_TQE, L_TVE, L_TRE, L_TKE,
  L_SDV, L_SDFA, L_SF, L_SBMAT, L_SCB, L_SQE, L_SRE, L_SKE, L_CKE, L_HKE, L_TIEKE, L_RC, L_CP, L_MULTN,
  L_FSCALE, L_MSCALE, L_RM, L_QL, L_KDUMMY, L_DRVVAL, L_ZLAM,                                          # wf
  L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_DRIVE,   # wi
- N_ITEMS) = range(79)
+ N_ITEMS) = range(83)
 # Items of one frame group (rows F0 + k·NF + item).
 (F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
  F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
@@ -51,7 +52,8 @@ from ..model.model import Model, TrussGroup
 S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, NS = range(9)
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
- P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, N_PAR) = range(25)
+ P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, P_MBLOCK,
+ N_PAR) = range(26)
 # Output slots of io.
 
 
@@ -249,19 +251,25 @@ class ModelPacks:
         par[P_NMULT] = m.n_multipliers
         par[P_ACCUM] = sky._accumulate
         mi, mj, mv = mass
+        # the mass products of the step take M in block form (M_s ⊗ I₃ where it is); the guard
+        # reads rows of the scalar CSR
+        mb, bi, bj, bv = mass_blocks(mi, mj, mv)
+        par[P_MBLOCK] = mb
         cf, ci = _Packer(lay, np.float64), _Packer(lay, np.int64)
         wf, wi = _Packer(lay, np.float64), _Packer(lay, np.int64)
         for item, arr in ((L_DSCALE, m.dof_scale), (L_Q0, m.q0), (L_GRAV, m.gravity_vector), (L_PAR, par),
                           (L_MV, mv), (L_TL0, tg.l0), (L_TEA, tg.ea), (L_TTAU, tg.tau), (L_CALPHA, m.corner_alpha),
                           (L_HALPHA, m.hinge_alpha), (L_HBETA, m.hinge_beta), (L_TIEALPHA, m.tie_alpha),
-                          (L_FMBODY, mo.follower_mbody), (L_CAXES, mo.cons_axes), (L_CMAG, mo.cons_magnitude)):
+                          (L_FMBODY, mo.follower_mbody), (L_CAXES, mo.cons_axes), (L_CMAG, mo.cons_magnitude),
+                          (L_BV, bv)):
             cf.add(item, arr)
         drive_ids = guard._drive_ids
         for item, arr in ((L_FREE, m.free), (L_MI, mi), (L_MJ, mj), (L_TEDOFS, tg.edofs), (L_TACT, tg.act),
                           (L_TSMAP, tg.smap), (L_CDOFS, m.corner_dofs), (L_CSMAP, m.corner_smap),
                           (L_HDOFS, m.hinge_dofs), (L_HSMAP, m.hinge_smap), (L_TIEDOFS, m.tie_dofs),
                           (L_TIESMAP, m.tie_smap), (L_FVDOFS, mo.follower_vdofs), (L_FSMAP, mo.follower_smap),
-                          (L_MVDOFS, mo.cons_vdofs), (L_MSMAP, mo.cons_smap), (L_DRVIDX, drive_ids)):
+                          (L_MVDOFS, mo.cons_vdofs), (L_MSMAP, mo.cons_smap), (L_DRVIDX, drive_ids), (L_BI, bi),
+                          (L_BJ, bj), (L_FPOS, m.free_index)):
             ci.add(item, arr)
         nm = m.n_multipliers
         for item, arr in ((L_INVS, inv_scale), (L_MASSK, m.mass_kdata), (L_VEVAL, np.zeros(n)),

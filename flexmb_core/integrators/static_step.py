@@ -29,12 +29,12 @@ from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies, compact_csr
 from .fast import INVERTED, NO_CONVERGENCE, NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, PIVOT, SVK_LIMIT
-from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BLK, L_CP, L_DQ, L_DRVIDX, L_DRVVAL,
-                    L_DSCALE, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_KDATA, L_LRH, L_LRL, L_LRP, L_LUWORK, L_MI, L_MJ,
-                    L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP,
-                    L_VEVAL, L_ZLAM, L_ZSLOT, N_PAR, NF, P_ACCUM, P_F0, P_KEEP, P_MAXIT, P_MINPIV, P_NFG, P_NMULT,
-                    P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1,
-                    view2)
+from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
+                    L_DRVIDX, L_DRVVAL, L_DSCALE, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_KDATA, L_LRH, L_LRL, L_LRP,
+                    L_LUWORK, L_MULTN, L_MVDOFS, L_PAR, L_PERM, L_Q0, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP,
+                    L_VEVAL, L_ZLAM, L_ZSLOT, N_PAR, NF, P_ACCUM, P_F0, P_KEEP, P_MAXIT, P_MBLOCK, P_MINPIV, P_NFG,
+                    P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed,
+                    unknown_fields, view1, view2)
 
 RISE = 7            # the root raised the incremental potential (guard flag 'energy')
 
@@ -183,9 +183,8 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
         ni += r[i] * r[i]
         ne += f_ext[i] * f_ext[i]
     rel = math.sqrt(nr) / max(math.sqrt(ni), math.sqrt(ne), 1e-300)
-    m_indptr = view1(ci, lay[L_MI])
-    _, grav = _energies(m_indptr, view1(ci, lay[L_MJ]), view1(cf, lay[L_MV]), zero_v, q, view1(cf, lay[L_Q0]),
-                        view1(cf, lay[L_GRAV]))
+    _, grav = _energies(int(par[P_MBLOCK]), view1(ci, lay[L_BI]), view1(ci, lay[L_BJ]), view1(cf, lay[L_BV]), zero_v,
+                        q, view1(cf, lay[L_Q0]), view1(cf, lay[L_GRAV]))
     io[SO_REL] = rel
     io[SO_STRAIN] = strain
     io[SO_GRAV] = grav

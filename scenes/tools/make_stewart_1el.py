@@ -1,19 +1,46 @@
-"""Derive scenes/stewart_platform_1el.yaml from scenes/stewart_platform.yaml (1 cubic element per leg)."""
+"""Derive the 1-element frame-leg twins from scenes/stewart_platform.yaml (1 cubic element per leg):
+scenes/stewart_platform_1el.yaml (its frame platform) and scenes/stewart_platform_1el_truss.yaml
+(the bar-leg twin's truss platform)."""
 from pathlib import Path
+
 src = Path("scenes/stewart_platform.yaml").read_text()
-head = """# The Stewart twin with flexible frame legs at the lowest mesh: scenes/stewart_platform.yaml with
+HEAD_1EL = """# The Stewart twin with flexible frame legs at the lowest mesh: scenes/stewart_platform.yaml with
 # ONE cubic frame element per leg instead of four (leg bending and the first leg modes kept). Offline
-# it runs at RTF ≈ 2.4 against 0.97 for 4 elements, 1.5e-10 m from the converged reference
-# (docs/benchmarks/stewart.md); in the node at 1 kHz it does not keep real time yet
-# (docs/benchmarks/node.md). Everything else is identical; regenerate with
-# `python scenes/tools/make_stewart_1el.py` after editing stewart_platform.yaml.
+# it runs at RTF ≈ 10 against ≈ 4.8 for 4 elements, 5e-11 m from the converged reference
+# (docs/benchmarks/stewart.md). With the platform's edges as bars instead of frames,
+# scenes/stewart_platform_1el_truss.yaml is ≈ 1.6× faster again. Everything else is identical;
+# regenerate with `python scenes/tools/make_stewart_1el.py` after editing stewart_platform.yaml.
 #
 """
-out = src.replace("name: stewart_platform\n", "name: stewart_platform_1el\n", 1)
-out = out.replace("description: Seed-paper Stewart platform, flexible actuator legs,",
-                  "description: Seed-paper Stewart platform, flexible actuator legs (1 cubic element each),", 1)
-n = out.count("elements: 4, order: 3, material: steel, section: leg")
-assert n == 1, n
-out = out.replace("elements: 4, order: 3, material: steel, section: leg", "elements: 1, order: 3, material: steel, section: leg")
-Path("scenes/stewart_platform_1el.yaml").write_text(head + out)
+HEAD_TRUSS = """# The flexible-leg Stewart twin at real-time cost: flexible frame legs (ONE cubic element each, as
+# scenes/stewart_platform_1el.yaml) on the truss platform of scenes/stewart_platform_bars.yaml (three
+# pin-jointed steel tubes as bars: a rigid triangle for the legs' ball joints, with the tubes' mass and
+# inertia, as a rigid-body platform). The legs keep their bending and their first modes; the platform
+# edges lose only their own bending, which moves the platform by ~1e-10 m (docs/benchmarks/stewart.md,
+# against the converged reference with flexible edges). Offline it runs at RTF ≈ 16–18 (≈ 1.6× the
+# frame platform, ≈ 1.8× Exudyn's ANCF legs on a rigid platform in the same run). Everything else is
+# identical; regenerate with `python scenes/tools/make_stewart_1el.py` after editing stewart_platform.yaml.
+#
+"""
+LEG_4 = "elements: 4, order: 3, material: steel, section: leg"
+EDGE_FRAME = "edge_ab: &edge {kind: frame, from: A, to: B, elements: 2, order: 3, material: steel, section: edge}"
+EDGE_TRUSS = "edge_ab: &edge {kind: truss, from: A, to: B, material: steel, section: edge}"
+
+
+def one_element(name: str, what: str) -> str:
+    out = src.replace("name: stewart_platform\n", f"name: {name}\n", 1)
+    out = out.replace("description: Seed-paper Stewart platform, flexible actuator legs,",
+                      f"description: Seed-paper Stewart platform, flexible actuator legs ({what}),", 1)
+    assert out.count(LEG_4) == 1, out.count(LEG_4)
+    return out.replace(LEG_4, LEG_4.replace("elements: 4", "elements: 1"))
+
+
+Path("scenes/stewart_platform_1el.yaml").write_text(HEAD_1EL + one_element("stewart_platform_1el",
+                                                                            "1 cubic element each"))
+truss = one_element("stewart_platform_1el_truss", "1 cubic element each, truss platform")
+assert truss.count(EDGE_FRAME) == 1, truss.count(EDGE_FRAME)
+truss = truss.replace(EDGE_FRAME, EDGE_TRUSS)
+truss = truss.replace("# Platform: three steel tube edges (pin-jointed, which is rigid for a triangle) + 10 kg payload.",
+                      "# Platform: three steel tube edges as bars (pin-jointed, which is rigid for a triangle) + 10 kg payload.")
+Path("scenes/stewart_platform_1el_truss.yaml").write_text(HEAD_TRUSS + truss)
 print("ok")

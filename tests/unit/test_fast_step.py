@@ -141,6 +141,7 @@ def _scene_history(path, fast, steps):
 @pytest.mark.parametrize("scene, steps", [
     ("stewart_platform_bars", 400),     # bars only, damped, six actuators on a command program
     ("stewart_platform_1el", 60),       # damped actuated frame legs
+    ("stewart_platform_1el_truss", 60),  # damped actuated frame legs on bars (the demo)
     ("deployable_boom", 150),           # frames and bars
     ("rps_manipulator", 150),
     ("boom_step", 100),                 # two frame groups

@@ -30,8 +30,9 @@ from flexmb_core.scene import load_scene
 from flexmb_io.twin import RunnerOptions, TwinRunner
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
-# twins a node serves: bar legs (the demo), frame legs, a shell platform, a boom with joints and a frame actuator
-TWINS = ("stewart_platform_bars.yaml", "stewart_platform_1el.yaml", "stewart_platform_shell.yaml",
+# twins a node serves: bar legs, frame legs on bars (the demo), a shell platform, a boom with joints and a
+# frame actuator
+TWINS = ("stewart_platform_bars.yaml", "stewart_platform_1el_truss.yaml", "stewart_platform_shell.yaml",
          "boom_step.yaml")
 # modules that need a ROS or viewer install are not the time loop's
 SKIP = ("ros2_node.node", "ros2_node.node_cli", "ros2_node.player", "ros2_node.live", "flexmb_io.viz",
