@@ -6,7 +6,7 @@ from pathlib import Path
 src = Path("scenes/stewart_platform.yaml").read_text()
 HEAD_1EL = """# The Stewart twin with flexible frame legs at the lowest mesh: scenes/stewart_platform.yaml with
 # ONE cubic frame element per leg instead of four (leg bending and the first leg modes kept). Offline
-# it runs at RTF ≈ 10 against ≈ 4.8 for 4 elements, 5e-11 m from the converged reference
+# it runs at RTF ≈ 11 against ≈ 5 for 4 elements, 2.4e-10 m from the converged reference
 # (docs/benchmarks/stewart.md). With the platform's edges as bars instead of frames,
 # scenes/stewart_platform_1el_truss.yaml is ≈ 1.6× faster again. Everything else is identical;
 # regenerate with `python scenes/tools/make_stewart_1el.py` after editing stewart_platform.yaml.
@@ -17,8 +17,8 @@ HEAD_TRUSS = """# The flexible-leg Stewart twin at real-time cost: flexible fram
 # pin-jointed steel tubes as bars: a rigid triangle for the legs' ball joints, with the tubes' mass and
 # inertia, as a rigid-body platform). The legs keep their bending and their first modes; the platform
 # edges lose only their own bending, which moves the platform by ~1e-10 m (docs/benchmarks/stewart.md,
-# against the converged reference with flexible edges). Offline it runs at RTF ≈ 16–18 (≈ 1.6× the
-# frame platform, ≈ 1.8× Exudyn's ANCF legs on a rigid platform in the same run). Everything else is
+# against the converged reference with flexible edges). Offline it runs at RTF ≈ 18 (≈ 1.6× the
+# frame platform, ≈ 1.9× Exudyn's ANCF legs on a rigid platform in the same run). Everything else is
 # identical; regenerate with `python scenes/tools/make_stewart_1el.py` after editing stewart_platform.yaml.
 #
 """
@@ -32,6 +32,7 @@ def one_element(name: str, what: str) -> str:
     out = out.replace("description: Seed-paper Stewart platform, flexible actuator legs,",
                       f"description: Seed-paper Stewart platform, flexible actuator legs ({what}),", 1)
     assert out.count(LEG_4) == 1, out.count(LEG_4)
+    out = out.replace("(frame variant, 4 cubic elements each)", "(frame variant, 1 cubic element each)", 1)
     return out.replace(LEG_4, LEG_4.replace("elements: 4", "elements: 1"))
 
 
