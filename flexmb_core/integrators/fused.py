@@ -33,7 +33,10 @@ def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
         s0 = 0.0
         s1 = 0.0
         s2 = 0.0
-        if mb == 3:             # rows 3b, 3b+1, 3b+2 from one pass over block row b
+        # rows 3b, 3b+1, 3b+2 from one pass over block row b, written out as in energy._energies:
+        # the same loop as a helper (njit inline="always", returning the three sums) made this
+        # kernel 2.2× slower (7.0 → 15.6 µs on 693 DOFs), a helper per free row 7× (52 µs)
+        if mb == 3:
             for k in range(m_indptr[b], m_indptr[b + 1]):
                 j = 3 * m_indices[k]
                 d = m_data[k]
@@ -43,7 +46,6 @@ def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
         elif free_pos[b] >= 0:
             for k in range(m_indptr[b], m_indptr[b + 1]):
                 s0 += m_data[k] * w_buf[m_indices[k]]
-        # (the free rows inline: a helper called per row costs more than the row's product)
         for t in range(mb):
             i = mb * b + t
             row = free_pos[i]
