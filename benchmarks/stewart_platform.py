@@ -41,8 +41,8 @@ import json
 import math
 import os
 import platform
-import subprocess
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -400,9 +400,11 @@ def write_plot(rows, ref, conv, hist, path: Path) -> bool:
         if not r.get("completed"):
             continue
         y = r["vs_reference"]["position_m"]
-        marker = "s" if r["kind"] == "bars" else ("D" if r["kind"] == "frame_tp" else ("o" if r["dt"] == 1e-3 else "^"))
+        marker = {"bars": "s", "frame_tp": "D"}.get(r["kind"], "o" if r["dt"] == 1e-3 else "^")
         ax.loglog(r["wall_per_sim_s"], y, marker, ms=7)
-        name = "bars" if r["kind"] == "bars" else f"{r['elements']} el" + (" + truss pl." if r["kind"] == "frame_tp" else "")
+        name = "bars" if r["kind"] == "bars" else f"{r['elements']} el"
+        if r["kind"] == "frame_tp":
+            name += " + truss pl."
         ax.annotate(f"{name}, {r['dt'] * 1e3:g} ms", (r["wall_per_sim_s"], y), fontsize=7, xytext=(4, 3),
                     textcoords="offset points")
     ax.axvline(1.0, color="k", lw=0.8, ls="--")
@@ -637,12 +639,13 @@ def _head_to_head_lines(h2h: list[dict], rounds: int, rows: list[dict], peers: l
              "flexmb's truss platform (the bar-leg twin's three pin-jointed steel tubes) is its class — a rigid "
              "triangle for the legs' ball joints, the edges' mass and inertia — while the frame platform adds the "
              "edges' own bending (6 more cubic elements, 171 more DOFs).", "",
-             "| case | steps/s (median) | RTF | ratio to Exudyn, same leg mesh (median of rounds) | pose dev. vs reference (m, sections A and P) |",
+             "| case | steps/s (median) | RTF | ratio to Exudyn, same leg mesh (median of rounds) "
+             "| pose dev. vs reference (m, sections A and P) |",
              "|---|---|---|---|---|"]
     for h in h2h:
         d = dev.get(h["key"] + "_dt1")
-        lines.append(f"| {h['label']} | {h['steps_per_s']:.0f} | {h['rtf']:.2f} | {h['ratio_to_exudyn_same_mesh']:.2f} | "
-                     + (f"{d['position_m']:.1e}" if d else "–") + " |")
+        lines.append(f"| {h['label']} | {h['steps_per_s']:.0f} | {h['rtf']:.2f} | "
+                     f"{h['ratio_to_exudyn_same_mesh']:.2f} | " + (f"{d['position_m']:.1e}" if d else "–") + " |")
     lines.append("")
     return lines
 
@@ -717,8 +720,8 @@ def head_to_head(rounds: int, until: float) -> list[dict]:
             ratio[key].append(got[key] / got[f"ancf{n}"])
         print(f"head to head, round {rnd + 1}/{rounds}: "
               + ", ".join(f"{key} {got[key]:.0f}" for key, _, _ in cases) + " steps/s", flush=True)
-    return [{"key": key, "label": label[key], "elements_per_leg": n, "code": "exudyn" if key.startswith("ancf") else "flexmb",
-             "steps_per_s": statistics.median(speed[key]), "rtf": statistics.median(speed[key]) * 1e-3,
+    return [{"key": key, "label": label[key], "elements_per_leg": n,
+             "code": "exudyn" if key.startswith("ancf") else "flexmb", "steps_per_s": statistics.median(speed[key]), "rtf": statistics.median(speed[key]) * 1e-3,
              "ratio_to_exudyn_same_mesh": statistics.median(ratio[key]), "steps_per_s_rounds": speed[key],
              "ratios_rounds": ratio[key]} for key, n, _ in cases]
 

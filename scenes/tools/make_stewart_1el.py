@@ -41,7 +41,7 @@ Path("scenes/stewart_platform_1el.yaml").write_text(HEAD_1EL + one_element("stew
 truss = one_element("stewart_platform_1el_truss", "1 cubic element each, truss platform")
 assert truss.count(EDGE_FRAME) == 1, truss.count(EDGE_FRAME)
 truss = truss.replace(EDGE_FRAME, EDGE_TRUSS)
-truss = truss.replace("# Platform: three steel tube edges (pin-jointed, which is rigid for a triangle) + 10 kg payload.",
-                      "# Platform: three steel tube edges as bars (pin-jointed, which is rigid for a triangle) + 10 kg payload.")
+PLATFORM = "# Platform: three steel tube edges (pin-jointed, which is rigid for a triangle) + 10 kg payload."
+truss = truss.replace(PLATFORM, PLATFORM.replace("tube edges (", "tube edges as bars ("))
 Path("scenes/stewart_platform_1el_truss.yaml").write_text(HEAD_TRUSS + truss)
 print("ok")
