@@ -78,7 +78,7 @@ def scene_from_dict(data: Any, source: str = "<dict>",
         _check_moment(root.get("loads").get("moments").get(k), m, members)
     point_masses = block("point_masses", refs)
     mass_damping = _mass_damping(root)
-    solver = _solver(root, overrides or {}, nodes)
+    solver = _solver(root, overrides or {}, names)      # a monitor may name a mesh point
     outputs = block("outputs", refs)
     for k, out in outputs.items():
         _check_output(root.get("outputs").get(k), out, members)

@@ -117,3 +117,24 @@ def test_a_closed_cylinder_has_no_seam_edges():
         scene_from_dict(data, source=str(path))
     assert "supports[5].edge" in str(err.value)
     assert "a closed cylinder has no edge 'start'; its edges: ['bottom', 'top']" in str(err.value)
+
+
+def test_a_path_following_monitor_may_name_a_mesh_point():
+    from flexmb_core.integrators.path_following import PathFollower
+    from flexmb_core.simulator import Simulator
+
+    data = _hemisphere()
+    data["solver"] = {"analysis": "static", "control": "arc_length", "arc_length": {"initial": 1e-3},
+                      "monitor": {"node": "hemi.A", "component": "x"}, "until_displacement": 2e-3, "max_steps": 50}
+    model = _compile(data)
+    sim = Simulator(model)
+    pf = PathFollower(sim)
+    pf.initialize()
+    pf.run()
+    rep = pf.report()
+    assert rep["monitor"] == {"node": "hemi.A", "component": "x"}
+    gid = model.node_ydofs[model.node("hemi.A"), 0]
+    assert rep["displacement"] == sim.state.q[gid] - model.q0[gid] >= 2e-3     # the pull at A is outward
+    data["solver"]["monitor"]["node"] = "hemi.Z"
+    with pytest.raises(SceneError, match=r"solver\.monitor\.node: unknown node 'hemi\.Z'; defined: .*'hemi\.A'"):
+        _compile(data)
