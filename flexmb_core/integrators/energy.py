@@ -45,17 +45,21 @@ def _energies(mb, indptr, indices, data, v, q, q0, fg):
             for k in range(indptr[i], indptr[i + 1]):
                 s += data[k] * v[indices[k]]
             kin += v[i] * s
+    return 0.5 * kin, gravity_potential(q, q0, fg)
+
+
+@njit(cache=True)
+def gravity_potential(q, q0, fg):
+    """Gravity potential −f_g·(q − q0) (J) of the positions ``q`` (ndof,)."""
     grav = 0.0
     for i in range(q.size):
         grav -= fg[i] * (q[i] - q0[i])
-    return 0.5 * kin, grav
+    return grav
 
 
-def energies(model: Model, state: State, mass: tuple | None = None) -> tuple[float, float]:
+def energies(model: Model, state: State, mass: tuple) -> tuple[float, float]:
     """Kinetic energy ½ vᵀMv and gravity potential −f_g·(q − q0) (J); ``mass`` the
-    :func:`mass_blocks` of the model's mass matrix (default: formed here)."""
-    if mass is None:
-        mass = mass_blocks(*compact_csr(*model.mass_csr))
+    :func:`mass_blocks` of the model's mass matrix (formed once by the caller)."""
     return _energies(*mass, state.v, state.q, model.q0, model.gravity_vector)
 
 

@@ -347,7 +347,7 @@ class NumbaStep:
         # accept_flagged keeps a failed attempt's last iterate, as the Python path leaves it
         self._keep_failed = spec.on_unconverged == "accept_flagged"
         par[P_KEEP] = self._keep_failed
-        self.packs = ModelPacks(m, ws, sky, guard, integ._inv_scale, integ._mass, par)
+        self.packs = ModelPacks(m, ws, sky, guard, integ._inv_scale, integ._mass, integ._mass_blocks, par)
         self._lay = self.packs.lay
         self._packs = self.packs.packs
         self._follower_scale, self._cons_scale = self.packs.follower_scale, self.packs.cons_scale

@@ -29,7 +29,6 @@ from ..kernels.shell import shell_group, shell_scratch
 from ..kernels.truss import truss_group
 from ..model.assembly import apply_drives
 from ..model.model import Model, TrussGroup
-from .energy import mass_blocks
 
 # Items of the whole model (rows of the layout table).
 (L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
@@ -230,7 +229,9 @@ class ModelPacks:
     sky : the skyline LU (its symbolic structure goes into ``wi``).
     guard : the step guard (its frame stations and driven DOFs).
     inv_scale : (nfree,) 1 / DOF scale of the free DOFs.
-    mass : the compact mass CSR ``(indptr, indices, data)``.
+    mass : the compact mass CSR ``(indptr, indices, data)`` (the guard reads its rows).
+    blocks : the same mass in block form, :func:`~.energy.mass_blocks` ``(mb, ptr, idx, val)``
+        (the step's mass products).
     par : (N_PAR,) the step constants; the group counts and offsets are set here.
 
     Attributes
@@ -240,7 +241,8 @@ class ModelPacks:
         caller before a step (moment load scales, the driven DOFs' values at the step's end).
     """
 
-    def __init__(self, model: Model, ws, sky, guard, inv_scale: np.ndarray, mass: tuple, par: np.ndarray):
+    def __init__(self, model: Model, ws, sky, guard, inv_scale: np.ndarray, mass: tuple, blocks: tuple,
+                 par: np.ndarray):
         m = model
         tg = m.truss if m.truss is not None else _empty_truss_group()
         mo = m.moments
@@ -251,9 +253,7 @@ class ModelPacks:
         par[P_NMULT] = m.n_multipliers
         par[P_ACCUM] = sky._accumulate
         mi, mj, mv = mass
-        # the mass products of the step take M in block form (M_s ⊗ I₃ where it is); the guard
-        # reads rows of the scalar CSR
-        mb, bi, bj, bv = mass_blocks(mi, mj, mv)
+        mb, bi, bj, bv = blocks
         par[P_MBLOCK] = mb
         cf, ci = _Packer(lay, np.float64), _Packer(lay, np.int64)
         wf, wi = _Packer(lay, np.float64), _Packer(lay, np.int64)

@@ -46,7 +46,7 @@ from ..model.model import Model
 from ..scene.schema import DofComponent, PathStepSpec, Scene
 from ..solvers.result import StepResult
 from .critical import PathPoint, TangentLU, classify
-from .energy import energies
+from .energy import gravity_potential
 
 if TYPE_CHECKING:
     from ..simulator import Simulator
@@ -276,7 +276,7 @@ class PathFollower:
         dlam_ds, du_ds = self._slopes()
         self.points.append(PathPoint(len(self.points), self.lam, self._displacement(), s, att.iterations, n_neg,
                                      dlam_ds, du_ds))
-        _, grav = energies(self.model, self.state)
+        grav = gravity_potential(self.state.q, self.model.q0, self.model.gravity_vector)
         return StepResult(True, att.iterations, rel, att.increment, 1, 0.0, strain, grav)
 
     def _slopes(self) -> tuple[float, float]:

@@ -36,7 +36,7 @@ from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
 from .critical import TangentLU
-from .energy import energies
+from .energy import gravity_potential
 from .path_following import dof_index, position_mask
 from .static_step import NumbaStatic
 
@@ -201,7 +201,7 @@ class StaticSolver:
         rf = (ws.r - ws.f_ext)[free]
         ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
         rel = float(np.linalg.norm(rf) / ref)
-        _, grav = energies(m, state)
+        grav = gravity_potential(state.q, m.q0, m.gravity_vector)
         if self.guard.enabled:
             flag, why = self._guard(state, u_p, strain)
             if flag:

@@ -27,12 +27,12 @@ from ..kernels.guard import energy_resolution, frame_orientation
 from ..model.assembly import update_load_scales
 from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
-from .energy import _energies, compact_csr
+from .energy import compact_csr, gravity_potential
 from .fast import INVERTED, NO_CONVERGENCE, NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, PIVOT, SVK_LIMIT
-from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
+from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BLK, L_CP, L_DQ,
                     L_DRVIDX, L_DRVVAL, L_DSCALE, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_KDATA, L_LRH, L_LRL, L_LRP,
                     L_LUWORK, L_MULTN, L_MVDOFS, L_PAR, L_PERM, L_Q0, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP,
-                    L_VEVAL, L_ZLAM, L_ZSLOT, N_PAR, NF, P_ACCUM, P_F0, P_KEEP, P_MAXIT, P_MBLOCK, P_MINPIV, P_NFG,
+                    L_VEVAL, L_ZLAM, L_ZSLOT, N_PAR, NF, P_ACCUM, P_F0, P_KEEP, P_MAXIT, P_MINPIV, P_NFG,
                     P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed,
                     unknown_fields, view1, view2)
 
@@ -183,8 +183,7 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
         ni += r[i] * r[i]
         ne += f_ext[i] * f_ext[i]
     rel = math.sqrt(nr) / max(math.sqrt(ni), math.sqrt(ne), 1e-300)
-    _, grav = _energies(int(par[P_MBLOCK]), view1(ci, lay[L_BI]), view1(ci, lay[L_BJ]), view1(cf, lay[L_BV]), zero_v,
-                        q, view1(cf, lay[L_Q0]), view1(cf, lay[L_GRAV]))
+    grav = gravity_potential(q, view1(cf, lay[L_Q0]), view1(cf, lay[L_GRAV]))
     io[SO_REL] = rel
     io[SO_STRAIN] = strain
     io[SO_GRAV] = grav
@@ -244,7 +243,8 @@ class NumbaStatic:
         par[P_SVK], par[P_RISE] = SVK_LIMIT_STRETCH, guard.rise_tolerance
         par[P_PIVTOL], par[P_MINPIV] = sky.pivot_tol, solver.lu.min_pivot_ratio
         par[P_KEEP] = solver.spec.on_unconverged == "accept_flagged"
-        self.packs = ModelPacks(m, ws, sky, guard, solver._inv_scale, compact_csr(*m.mass_csr), par)
+        mass = compact_csr(*m.mass_csr)          # statics: no inertia, the block form unused
+        self.packs = ModelPacks(m, ws, sky, guard, solver._inv_scale, mass, (1, *mass), par)
         self._wmask = np.ascontiguousarray(solver._w, dtype=np.float64)
         self._io = np.zeros(N_SO)
 

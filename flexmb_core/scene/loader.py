@@ -202,8 +202,8 @@ def _mass_damping(root: Node) -> float:
     return read_key(root, SceneFile, "damping").mass_proportional
 
 
-def _solver(root: Node, overrides: dict[str, Any], nodes: dict) -> SolverSpec:
+def _solver(root: Node, overrides: dict[str, Any], names: dict) -> SolverSpec:
     """``solver``, with the command line's ``overrides`` (flags, ``--override solver.KEY``) on top."""
     n = check_keys(root.get("solver", {}), SolverSpec)
     merged = {**n.value, **{k: v for k, v in overrides.items() if v is not None}}
-    return read(Node(merged, n.path, n.source), SolverSpec, {"node": nodes})
+    return read(Node(merged, n.path, n.source), SolverSpec, {"node": names})
