@@ -9,8 +9,9 @@ modified-Newton refresh rule, the rates, the energies and the step guard's check
 very kernels the Python path calls, in the same order, so the states it produces are bit-identical
 to it (``tests/unit/test_fast_step.py``); it only removes the Python between them.
 
-Not covered (:meth:`NumbaStep.unsupported` names it and the integrator keeps its Python path):
-the Chung–Hulbert integrator (kept to show it is not objective). A step the kernel cannot finish —
+Every integrator: generalized-α, Newmark and the Chung–Hulbert form (kept to show it is not
+objective; with multipliers the Python path refuses it, :meth:`NumbaStep.unsupported` names that).
+A step the kernel cannot finish —
 no convergence, a refused root — leaves the state as it was (under ``accept_flagged``: at the last
 iterate, as the Python path leaves it) and hands back to the integrator, whose ``on_unconverged``
 policy proceeds as for any failed attempt; its sub-steps are numba steps too. A pivot the skyline
@@ -37,10 +38,10 @@ from .fused import apply_increment, inertial_residual, update_rates, velocity_at
 from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
                     L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
                     L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
-                    L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZSLOT, NF, N_PAR, P_ACCUM, P_AF,
-                    P_AM, P_BAL, P_BETA, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA, P_KEEP, P_MAXAGE,
-                    P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL,
-                    ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1, view2)
+                    L_QEVAL, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZSLOT, NF, N_PAR,
+                    P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA,
+                    P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE,
+                    P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1, view2)
 
 # Return codes of model_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
@@ -113,6 +114,11 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     nmult = int(par[P_NMULT])
     nfg = int(par[P_NFG])
     f0 = int(par[P_F0])
+    # Chung–Hulbert (DynamicIntegrator._newton): Newmark kinematics with a itself (ã ≡ a), inertia
+    # (1−αm) a_{n+1} + αm a_n (the inertial residual with αf = 0), forces at q_{n+1−αf} (and the
+    # rates blended alike), tangent (1−αf) K + (1−αm)/(βΔt²) M
+    ch = par[P_CH] != 0.0
+    q_eval = view1(wf, lay[L_QEVAL])
 
     # -- predictor (Python path: DynamicIntegrator._newton) -------------------------------------
     n = q.size
@@ -126,6 +132,14 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     g_p = ivec[6]
     c_tilde = 1.0 / (beta * dt * dt)
     c_a = (1.0 - am) / ((1.0 - af) * beta * dt * dt)
+    af_r = af
+    af_v = 0.0
+    k_scale = 1.0
+    if ch:
+        c_a = (1.0 - am) / (beta * dt * dt)
+        af_r = 0.0
+        af_v = af
+        k_scale = 1.0 - af
     c_v = gamma / (beta * dt)
     c_pred = (0.5 - beta) * dt * dt
     c_bdt = beta * dt * dt
@@ -166,14 +180,20 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     # the kernels it is passed to (tests/unit/test_signatures.py)
     no_dlam = dt < 0.0
     v_k = v_eval        # undamped: stays zero (ws.zero_v of the Python path), the kernels do not read it
+    q_force = q_eval if ch else q     # where the forces are evaluated
     # -- Newton ------------------------------------------------------------------------------------
     for it in range(1, max_it + 1):
+        if ch:
+            for i in range(n):
+                h = q[i] * (1.0 - af)
+                h += af * q_n[i]
+                q_eval[i] = h
         if damped:
-            velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, 0.0, v_eval)
-        strain, diss = assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci, wf, wi,
-                                 lay, par)
+            velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, af_v, v_eval)
+        strain, diss = assemble_packed(q_force, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci,
+                                       wf, wi, lay, par)
         keep = it == 1 and guarded
-        nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m, mb, b_indptr,
+        nr, ref = inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af_r, gamma, dt, c_m, mb, b_indptr,
                                     b_indices, b_data, r, f_ext, free_pos, view1(wf, lay[L_WBUF]), rf, keep, g_p)
         rel = nr / ref
         if keep:
@@ -190,6 +210,9 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
             code = NON_FINITE_RESIDUAL
             break
         if refresh:
+            if ch:
+                for i in range(kdata.size):
+                    kdata[i] *= k_scale
             step = _factor_kernel(kdata, view1(wf, lay[L_MASSK]), coef, view1(wi, lay[L_SLOT]), accumulate,
                                   view1(wi, lay[L_ZSLOT]), view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]),
                                   view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH]), view1(wi, lay[L_URP]), view1(wi, lay[L_URL]),
@@ -216,7 +239,7 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
             break
         refresh = (not modified) or inc > contraction * prev_inc
         prev_inc = inc
-    update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, a, v, atil)
+    update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, 0.0 if ch else am, af_r, gamma, dt, a, v, atil)
     kin = 0.0
     grav = 0.0
     if code == OK:
@@ -266,7 +289,8 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
         g, x, y, e_end = dynamic_guard(q, dq, free, view1(cf, lay[L_DSCALE]), ivec, gvec, int(led[0]), react,
                                        int(led[1]), m_indptr, m_indices, m_data, f_ext, r, rf, a, v,
                                        view1(wi, lay[L_DRIVE]), c_m, c_v, tol, par[P_CMASS], par[P_RISE], par[P_BAL],
-                                       u_p, strain, 1.0, extra_p, extra_size, w_mom, kin, led[3], check_balance)
+                                       u_p, strain, 1.0 / (1.0 - af_v), extra_p, extra_size, w_mom, kin, led[3],
+                                       check_balance)
         led[4] = e_end
         io[IO_X] = x
         io[IO_Y] = y
@@ -321,8 +345,10 @@ class NumbaStep:
     @staticmethod
     def unsupported(model: Model, spec: SolverSpec) -> str:
         """'' when :func:`model_step` covers every step of this model, else what it lacks."""
-        if spec.analysis != "dynamic" or spec.integrator not in ("newmark", "generalized_alpha"):
-            return f"integrator {spec.integrator}"
+        if spec.analysis != "dynamic":
+            return f"analysis {spec.analysis}"
+        if spec.integrator == "chung_hulbert" and model.n_multipliers:
+            return "integrator chung_hulbert with multipliers (the Python path refuses it)"
         unknown = unknown_fields(model)
         if unknown:
             return f"model features this step does not know: {', '.join(unknown)}"
@@ -344,6 +370,7 @@ class NumbaStep:
         par[P_SVK], par[P_RISE], par[P_BAL] = SVK_LIMIT_STRETCH, guard.rise_tolerance, guard.balance_tolerance
         par[P_CMASS], par[P_PIVTOL], par[P_MINPIV] = guard._c_mass, sky.pivot_tol, integ.lu.min_pivot_ratio
         par[P_DAMPED] = bool(m.material_damping)
+        par[P_CH] = spec.integrator == "chung_hulbert"
         # accept_flagged keeps a failed attempt's last iterate, as the Python path leaves it
         self._keep_failed = spec.on_unconverged == "accept_flagged"
         par[P_KEEP] = self._keep_failed
@@ -425,9 +452,12 @@ class NumbaStep:
         if lam.size:                    # the step's start, restored if the attempt fails
             self._lam_n[:] = lam
             self._rate_n[:] = state.lam_rate
-        balance = not integ.set_stretches(state, dt, lam_new, lam_rate)
+        ch = integ.spec.integrator == "chung_hulbert"
+        # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
+        balance = not integ.set_stretches(state, dt, lam_new, lam_rate) and not ch
         rates = state.lam_rate if integ._damped else self._zero_rate
-        self.loads(t_n + dt)
+        t_new = t_n + dt
+        self.loads(t_new - integ.af * dt if ch else t_new)
         self.packs.drives(state.q, t_n + dt)
         f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs

@@ -1,10 +1,12 @@
 """The numba step (flexmb_core.integrators.fast) is an exact accelerator: on every model it
 covers, step by step, it gives bit for bit what the Python path of DynamicIntegrator gives —
 including held tangents, refused roots and the sub-stepping that follows, actuator stretches and
-their rates, material damping, bars, several frame groups, shells, multipliers, moment loads and
-driven supports — and it declines what it does not cover (Chung–Hulbert, accept_flagged)."""
+their rates, material damping, bars, several frame groups, shells, multipliers, moment loads,
+driven supports and the Chung–Hulbert form — and it declines what it does not cover (Chung–Hulbert
+with multipliers, which the Python path refuses)."""
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -63,8 +65,9 @@ def _history(d, fast, steps, setup=None):
     return _steps(sim, fast, steps)
 
 
-@pytest.mark.parametrize("d", [_b1(), _b1("full"), _b1(integrator="newmark"), _b1(gravity=True)],
-                         ids=["modified", "full", "newmark", "gravity"])
+@pytest.mark.parametrize("d", [_b1(), _b1("full"), _b1(integrator="newmark"), _b1(gravity=True),
+                               _b1(integrator="chung_hulbert"), _b1("full", integrator="chung_hulbert")],
+                         ids=["modified", "full", "newmark", "gravity", "chung_hulbert", "chung_hulbert_full"])
 def test_bit_identical_to_the_python_path(d):
     a, b = _history(d, True, 300), _history(d, False, 300)
     assert a[0] == b[0]
@@ -83,12 +86,20 @@ def test_bit_identical_through_refused_roots_and_sub_steps():
     assert any(r[4] > 1 for r in a[0]) and a[0][125][9] == "inverted"
 
 
-def test_chung_hulbert_keeps_the_python_path():
+def test_chung_hulbert_with_multipliers_keeps_the_python_path_and_its_refusal():
+    from pathlib import Path
+
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.scene import load_scene
+    from flexmb_core.simulator import Simulator
+
+    model = compile_scene(load_scene(Path(__file__).resolve().parents[2] / "scenes" / "right_angle_cantilever.yaml"))
+    spec = dataclasses.replace(Simulator(model).spec, integrator="chung_hulbert")
+    assert "integrator chung_hulbert with multipliers" in NumbaStep.unsupported(model, spec)
     d = _b1()
     d["solver"].update(integrator="chung_hulbert")
     model, sim = build(d)
-    assert "integrator chung_hulbert" in NumbaStep.unsupported(model, sim.spec)
-    assert sim._dynamic.fast is None
+    assert NumbaStep.unsupported(model, sim.spec) == "" and sim._dynamic.fast is not None
 
 
 def test_bit_identical_when_failed_steps_are_accepted_and_flagged():
