@@ -135,7 +135,7 @@ def main() -> int:
              f"{a.warmup / 60:g} min, {result['rss_end_mb']:.1f} MB at the end (max {result['rss_max_mb']:.1f} MB)",
              f"- growth after warm-up: **{growth:+.2f} MB** over {(a.seconds - a.warmup) / 60:g} min "
              f"(target < {GROWTH_MAX_MB:g} MB: {'met' if result['target_met'] else 'NOT met'})",
-             f"- the player's (the 1 kHz client's) growth after warm-up: "
+             "- the player's (the 1 kHz client's) growth after warm-up: "
              + (f"{player_growth:+.2f} MB" if player_growth is not None else "not sampled"),
              f"- steps {node['steps']}, missed deadlines {node['deadline_misses']}", "",
              "| t (min) | node RSS (MB) | player RSS (MB) |", "|---|---|---|"]

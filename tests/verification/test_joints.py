@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from builders import build, extended_tangent_error
-from flexmb_core.errors import SceneError
 
 
 def rod_scene(theta0=0.1, length=1.0, E=2e13):

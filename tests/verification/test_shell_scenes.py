@@ -107,16 +107,54 @@ def test_open_cylinder_pulled_out_converges_under_refinement():
     for n in (2, 4, 6):
         _, out = _solve(DATA / f"shell_pulled_cylinder_{n}.yaml")
         ua.append(out["A"][2])
-        ub.append(out["B"][2])
+        ub.append(out["D"][2])
         uc.append(-out["C"][1])
     # measured (×1e-3, P/4 = 1), with the assumed strains: A 4.386, 4.507, 4.534 — errors 0.148, 0.026 against
-    # 6×6 (ratio 5.6); B 4.2998, 4.3114, 4.3171 (ratio 3.0, 2×2 already within 0.4 %); before them (issue 16)
+    # 6×6 (ratio 5.6); D (the free end above A) 4.2998, 4.3114, 4.3171 (ratio 3.0, 2×2 already within 0.4 %);
+    # before them (issue 16)
     # A 3.183, 4.364, 4.507
     _refines(ua, 2.5)
     _refines(ub, 2.5)
     _refines(uc, 2.5)
     assert ua[-1] > ub[-1] > 0.0 and uc[-1] > 0.0     # pulled out, the free end follows, the side pulls in
 
+
+
+def test_open_cylinder_pulled_out_far_snaps_and_is_traced_through_it():
+    """The pull-out at large deflection (P up to 40 000, the octant carrying P/4), traced by arc length
+    on 4 × 4 cells: the free end's section snaps near P/P_max = 0.48 — a load maximum, then a load
+    minimum, reported as limit points — and the path carries on to P_max, where the pulled point has
+    moved out by about half the radius while the mid-plane's side has come in by almost the radius."""
+    from flexmb_core.integrators.path_following import PathFollower
+    from flexmb_core.scene import scene_from_dict
+    from flexmb_core.scene.loader import parse_yaml
+
+    path = SCENES / "shell_pulled_cylinder.yaml"
+    data = parse_yaml(path.read_text(), str(path))
+    data["shells"]["tube"]["mesh"]["divisions"] = [4, 4]
+    data["loads"]["forces"]["pull"]["force"] = [0.0, 0.0, 10000.0]
+    data["solver"] = {"analysis": "static", "control": "arc_length",
+                      "arc_length": {"initial": 0.05, "max": 1.0, "target_iterations": 5},
+                      "monitor": {"node": "tube.A", "component": "z"}, "until_load_factor": 1.0, "max_steps": 200}
+    model = compile_scene(scene_from_dict(data, source=str(path)))
+    sim = Simulator(model)
+    pf = PathFollower(sim)
+    pf.initialize()
+    pf.run()
+    rep = pf.report()
+    kinds = [c["kind"] for c in rep["limit_points"]]
+    assert kinds == ["load_maximum", "load_minimum"], rep["limit_points"]
+    top, bottom = rep["limit_points"]
+    # measured: λ 0.4791 at w_A 2.375, then 0.4714 at 2.387 (8 × 8 cells: 0.5125, 0.5115)
+    assert 0.40 < bottom["load_factor"] < top["load_factor"] < 0.55, rep["limit_points"]
+    assert rep["load_factor"] >= 1.0 and rep["finished"] == "load factor reached 1"
+    lam = np.array(rep["path"]["load_factor"])
+    w_a = np.array(rep["path"]["displacement"])
+    assert np.all(np.diff(w_a) > 0.0)               # the pulled point moves out all the way
+    grid = model.node_ydofs
+    u_b = sim.state.q[grid[model.node("tube.B"), 1]] - model.q0[grid[model.node("tube.B"), 1]]
+    # measured at λ = 1.076: w_A 2.664, −u_B 4.376 (8 × 8 at λ = 1.053: 2.727, 4.517)
+    assert 0.5 < w_a[-1] / 4.953 < 0.6 and 0.85 < -u_b / 4.953 < 0.95, (lam[-1], w_a[-1], u_b)
 
 def test_spherical_cap_closed_at_the_pole_covers_the_sphere_exactly():
     """A cap closed at the pole (a fan of triangles there) and a full turn (closed seam): every node
