@@ -119,22 +119,26 @@ def _hermite(s, h, p0, v0, p1, v1, rate: bool = False):
 
 
 @njit(cache=True, nogil=True)
-def _evaluate_lines(t, base, rate, t_ref, fade_t, fade_T, seg_t0, seg_end, seg_p0, seg_v0, seg_cubic,
+def _evaluate_lines(t, base, rate, acc, acc_end, t_ref, fade_t, fade_T, seg_t0, seg_end, seg_p0, seg_v0, seg_cubic,
                     lengths, rates):
     """Commanded lengths (m) and rates (m/s) of every actuator at ``t`` into ``lengths, rates (na,)``:
-    the line ``base + rate (t − t_ref)`` (its rate fading linearly to 0 over ``fade_T`` from
-    ``fade_t``, then frozen) and, while ``t < seg_end``, the hold segment from ``seg_p0`` (rate
+    the line ``base + rate (t − t_ref)``, bent by the acceleration ``acc`` from ``t_ref`` to
+    ``acc_end`` (a bare stream's parabola, carried over a few lost samples) and straight after
+    (its rate fading linearly to 0 over ``fade_T`` from ``fade_t`` ≥ ``acc_end``, then frozen) and, while ``t < seg_end``, the hold segment from ``seg_p0`` (rate
     ``seg_v0``) at ``seg_t0``: linear onto ``base``, or (``seg_cubic``) the cubic Hermite onto the
     line's length and rate at the segment's end. One call for what the node evaluates at every
     step and every command (numpy on six-element arrays cost ~20 µs of interpreter per call)."""
     for i in range(base.size):
         e = t - t_ref[i]
-        v = rate[i]
+        ea = max(0.0, min(t, acc_end[i]) - t_ref[i])     # s of the line's bend so far
+        v = rate[i] + acc[i] * ea
         if t > fade_t[i]:
             tau = min(t - fade_t[i], fade_T[i])
             e = fade_t[i] - t_ref[i] + tau - tau * tau / (2.0 * fade_T[i])
             v = v * (1.0 - tau / fade_T[i])
         length = rate[i] * e + base[i]
+        if ea > 0.0:
+            length += acc[i] * (ea * e - 0.5 * ea * ea)
         if t < seg_end[i]:
             t0, t1 = seg_t0[i], seg_end[i]
             h = t1 - t0
@@ -157,13 +161,13 @@ def _evaluate_lines(t, base, rate, t_ref, fade_t, fade_T, seg_t0, seg_end, seg_p
 
 
 @njit(cache=True, nogil=True)
-def _bound_joins(idx, now, a_max, h_max, base, rate, t_ref, seg_p0, seg_v0, seg_end, fade_t):
+def _bound_joins(idx, now, a_max, h_max, base, rate, acc, t_ref, seg_p0, seg_v0, seg_end, fade_t):
     """Lengthen the cubic joins of actuators ``idx`` (starting at ``now``) until the commanded
     length's acceleration stays within ``a_max`` (m/s²), at most to ``h_max`` (s). A cubic's
     acceleration is linear in time, so it peaks at an end of the join:
     ``(6d − 2h(2v₀ + v₁))/h²`` and ``(−6d + 2h(v₀ + 2v₁))/h²`` with ``d`` the join's rise onto the
     line. A join that already complies is left as it is (bit for bit); the line's fade starts no
-    earlier than the join's new end."""
+    earlier than the join's new end, and a lengthened join's line is straight (``acc`` 0)."""
     for j in range(idx.size):
         i = idx[j]
         h = seg_end[i] - now
@@ -177,15 +181,18 @@ def _bound_joins(idx, now, a_max, h_max, base, rate, t_ref, seg_p0, seg_v0, seg_
             h = min(1.25 * h, h_max)
         if now + h != seg_end[i]:
             seg_end[i] = now + h
+            acc[i] = 0.0
             if fade_t[i] < seg_end[i]:
                 fade_t[i] = seg_end[i]
 
 
 @njit(cache=True, nogil=True)
-def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, hist_n, hist_stamped, base, rate):
+def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, hist_n, hist_stamped, base, rate,
+                   acc_out):
     """The parabola through each new sample ``lengths[j]`` (actuator ``idx[j]``, sample time ``tau``)
     and its previous two (``hist_*``, shifted in here), evaluated ``dt1`` after ``tau``: its length
-    into ``base[idx[j]]``, its rate into ``rate[idx[j]]``. See :meth:`CommandSchedule._predict`."""
+    into ``base[idx[j]]``, its rate into ``rate[idx[j]]``, its acceleration into ``acc_out[idx[j]]``.
+    See :meth:`CommandSchedule._predict`."""
     for j in range(idx.size):
         i = idx[j]
         hl0, hl1 = hist_L[i, 0], hist_L[i, 1]
@@ -218,6 +225,7 @@ def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, his
         hist_stamped[i] = stamped
         base[i] = x + vel * dt1 + 0.5 * acc * dt1 * dt1
         rate[i] = vel + acc * dt1
+        acc_out[i] = acc
 
 
 @njit(cache=True, nogil=True)
@@ -443,6 +451,8 @@ class CommandSchedule:
         self.base = self.rest.copy()         # m, length at the reference time
         self.rate = np.zeros(na)             # m/s
         self.t_ref = np.zeros(na)            # s, reference time of base (the stamp)
+        self.acc = np.zeros(na)              # m/s², the line's bend after t_ref (a bare stream's parabola)
+        self.acc_end = np.zeros(na)          # s, … until then
         # the hold segment that joins the previous command to the line: [seg_t0, seg_end)
         self.seg_t0 = np.zeros(na)
         self.seg_end = np.full(na, -math.inf)
@@ -671,6 +681,7 @@ class CommandSchedule:
                 gone = tr.idx[~keep]
                 self.base[gone] = cur[gone]
                 self.rate[gone] = 0.0
+                self.acc[gone] = 0.0
                 self.t_ref[gone] = now
                 self.seg_end[gone] = -math.inf
                 self.fade_t[gone] = math.inf
@@ -679,6 +690,7 @@ class CommandSchedule:
         if self._held is not None:         # back from a timeout: unaddressed actuators resume where they are
             self.base[:] = cur
             self.rate[:] = 0.0
+            self.acc[:] = 0.0
             self.t_ref[:] = now
             self.seg_end[:] = -math.inf
             self.fade_t[:] = math.inf
@@ -730,7 +742,7 @@ class CommandSchedule:
         dt1 = 0.0 if T == self.dt else t1 - self._grid - tau
         _predict_lines(np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(lengths, dtype=np.float64),
                        float(tau), bool(stamped), float(self._grid), float(T), float(dt1), self.hist_L, self.hist_t,
-                       self.hist_n, self.hist_stamped, self.base, self.rate)
+                       self.hist_n, self.hist_stamped, self.base, self.rate, self.acc)
 
     def _apply(self, topic, idx, lengths, rates, t_ref, now, stamp) -> None:
         if self.hold != "step":
@@ -746,11 +758,14 @@ class CommandSchedule:
         if rates is not None:                 # the commanded line L + v (t − stamp)
             self.base[idx] = lengths
             self.rate[idx] = rates
+            self.acc[idx] = 0.0
             self.t_ref[idx] = t_ref
         elif self.hold == "smooth":           # the predicted line, reached at the segment's end
             t1 = now + T
             self._predict(idx, lengths, tau, stamp > 0, T, t1)
             self.t_ref[idx] = t1
+            # the parabola carries the line over up to _MAX_LOST lost samples, then it goes straight on
+            self.acc_end[idx] = t1 + min(_MAX_LOST * self._grid, STALL_GRACE)
             # a late sample, a stalled transport: the line goes on for a while (at least STALL_GRACE)
             # before its rate fades to rest, so a stall of a few tens of ms is not a stop and go
             self.fade_t[idx] = t1 + max(T, STALL_GRACE)
@@ -758,6 +773,7 @@ class CommandSchedule:
         else:
             self.base[idx] = lengths
             self.rate[idx] = 0.0
+            self.acc[idx] = 0.0
             self.t_ref[idx] = t_ref
         if T > 0.0:
             self.seg_t0[idx] = now
@@ -773,7 +789,8 @@ class CommandSchedule:
             self.last_period = T
             if cubic and self.max_accel < math.inf:
                 _bound_joins(np.ascontiguousarray(idx, dtype=np.int64), float(now), self.max_accel, MAX_HOLD_PERIOD,
-                             self.base, self.rate, self.t_ref, self.seg_p0, self.seg_v0, self.seg_end, self.fade_t)
+                             self.base, self.rate, self.acc, self.t_ref, self.seg_p0, self.seg_v0, self.seg_end,
+                             self.fade_t)
         else:
             self.seg_end[idx] = -math.inf
         self._mark_accepted(now, stamp)
@@ -790,20 +807,20 @@ class CommandSchedule:
         copies: the first command must not wait for numba (seconds with a cold cache)."""
         na = len(self.names)
         z, zi = np.zeros(na), np.zeros(na, dtype=np.int64)
-        _evaluate_lines(0.0, z, z, z, z.copy() + np.inf, z + 1.0, z, z - np.inf, z, z, np.zeros(na, dtype=bool),
+        _evaluate_lines(0.0, z, z, z, z, z, z.copy() + np.inf, z + 1.0, z, z - np.inf, z, z, np.zeros(na, dtype=bool),
                         np.zeros(na), np.zeros(na))
         _predict_lines(np.arange(na, dtype=np.int64), z, 0.0, False, self.dt, self.dt, 0.0, np.zeros((na, 2)),
-                       np.zeros((na, 2)), zi.copy(), np.zeros(na, dtype=bool), np.zeros(na), np.zeros(na))
+                       np.zeros((na, 2)), zi.copy(), np.zeros(na, dtype=bool), np.zeros(na), np.zeros(na), np.zeros(na))
         _interval_stats(np.full(3, self.dt))
         _arrival_slope(np.arange(4.0), np.arange(4.0), 3, 3)
-        _bound_joins(np.arange(na, dtype=np.int64), 0.0, 1.0, MAX_HOLD_PERIOD, z, z, z, z, z, z + self.dt,
-                     np.zeros(na))
+        _bound_joins(np.arange(na, dtype=np.int64), 0.0, 1.0, MAX_HOLD_PERIOD, z, z, np.zeros(na), z, z, z,
+                     z + self.dt, np.zeros(na))
 
     # -- evaluation ----------------------------------------------------------------------------
     def _lines(self, t: float) -> None:
         """Lengths and rates of the lines and hold segments at ``t`` into ``_out``, ``_out_rate``."""
-        _evaluate_lines(t, self.base, self.rate, self.t_ref, self.fade_t, self.fade_T, self.seg_t0, self.seg_end,
-                        self.seg_p0, self.seg_v0, self.seg_cubic, self._out, self._out_rate)
+        _evaluate_lines(t, self.base, self.rate, self.acc, self.acc_end, self.t_ref, self.fade_t, self.fade_T,
+                        self.seg_t0, self.seg_end, self.seg_p0, self.seg_v0, self.seg_cubic, self._out, self._out_rate)
 
     def _direct(self, t: float) -> np.ndarray:
         """Commanded lengths at ``t`` (m, a reused buffer): the lines, the hold segments, the trajectory."""
