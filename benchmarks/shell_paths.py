@@ -17,8 +17,9 @@ Each case runs on the scene's mesh and on a finer one; the table gives the paths
 levels and the difference between the meshes. The published reference values are kept out of the
 project (they stay an independent check), as in ``tests/verification/test_shell_scenes.py``.
 
-Usage: ``python benchmarks/shell_paths.py [--out docs/benchmarks] [--quick]`` (``--quick``: the
-scenes' meshes only, ~3 min; the default adds the fine meshes, ~25 min on one core).
+Usage: ``python benchmarks/shell_paths.py [--out docs/benchmarks] [--quick] [--cases pulled,pinched,hemisphere]``
+(``--quick``: the scenes' meshes only, ~3 min; the default adds 16 × 16 cells, ~1 h on one core;
+``--render JSON`` rewrites the report and plots from a run's ``shell_paths.json``).
 """
 
 from __future__ import annotations
@@ -56,23 +57,32 @@ class Case:
     monitor: dict
     curves: tuple                     # (label, point, component, sign): what is plotted and tabled
     edits: dict = field(default_factory=dict)     # shell mesh/thickness/material/points set to the benchmark's
+    note: str = ""                                # what the paths show (under the tables)
 
 
 CASES = (
     Case("pulled", "shell_pulled_cylinder", "Open-ended cylinder pulled out (Sze et al. 3.5)", 40000.0, 0.25,
          ((8, 8), (16, 16)), {"initial": 0.05, "min": 1e-4, "max": 1.0, "target_iterations": 5},
          {"node": "tube.A", "component": "z"},
-         (("w_A", "A", 2, 1.0), ("−u_B", "B", 1, -1.0), ("−u_C", "C", 1, -1.0))),
+         (("w_A", "A", 2, 1.0), ("−u_B", "B", 1, -1.0), ("−u_C", "C", 1, -1.0)),
+         note="The free end's section snaps through near P/P_max = 0.5: a load maximum and a load minimum close "
+              "together (the limit points above), −u_B jumping on and −u_C turning back; past it the pull-out "
+              "stiffens again. Both meshes trace the same path."),
     Case("pinched", "shell_pinched_cylinder", "Pinched cylinder on rigid diaphragms (Sze et al. 3.6)", 12000.0, 0.25,
          ((8, 8), (16, 16)), {"initial": 0.3, "min": 1e-4, "max": 5.0, "target_iterations": 5},
          {"node": "tube.C", "component": "z"},
          (("−w_A", "C", 2, -1.0), ("u_B", "E", 1, 1.0)),
          {"radius": 100.0, "length": 100.0, "thickness": 1.0, "E": 3.0e4,
-          "points": {"C": [100.0, 0.0, 100.0], "E": [100.0, 100.0, 0.0]}}),
+          "points": {"C": [100.0, 0.0, 100.0], "E": [100.0, 100.0, 0.0]}},
+         note="The pinched region wrinkles: each mesh crosses a series of local snaps (the limit points above, "
+              "traced through by the arc length) whose loads depend on the mesh, and past them the two paths "
+              "approach each other. A mesh-converged path of this case needs finer meshes than these two."),
     Case("hemisphere", "shell_pinched_hemisphere", "Hemisphere with an 18° hole (Sze et al. 3.4)", 400.0, 0.5,
          ((8, 8), (16, 16)), {"initial": 0.05, "min": 1e-4, "max": 2.0, "target_iterations": 5},
          {"node": "hemi.A", "component": "x"},
-         (("u_A", "A", 0, 1.0), ("−u_B", "B", 1, -1.0))),
+         (("u_A", "A", 0, 1.0), ("−u_B", "B", 1, -1.0)),
+         note="The hemisphere stiffens without a limit point, the inward push (−u_B) twice the outward pull (u_A) "
+              "at P_max; the two meshes agree closely."),
 )
 
 
@@ -162,7 +172,8 @@ def report(case: Case, runs: list) -> list[str]:
                   f"half-length {e['length']:g}, t = {e['thickness']:g}, E = {e['E']:g}), its points moved with them.",
                   ""]
     lines += [f"P_max = {case.p_max:g}; the modelled piece carries {case.share:g} P at each load point. Arc length "
-              f"(cylindrical, Δl ≤ {case.arc['max']:g}), monitor {case.monitor['node']} {case.monitor['component']}.",
+              f"(cylindrical, Δl ≤ {case.arc['max']:g}), monitor {case.monitor['node']} "
+              f"{case.monitor['component']}.",
               "", "| cells | DOFs | increments | Newton it. | wall (s) | limit points | bifurcations |",
               "|---|---|---|---|---|---|---|"]
     for r in runs:
@@ -183,6 +194,8 @@ def report(case: Case, runs: list) -> list[str]:
             dev = max(abs(c - f) / max(abs(f), 1e-12) for c, f in zip(row[0], row[-1]))
             cells.append(f"{dev * 100:.1f} %")
         lines.append("| " + " | ".join(cells) + " |")
+    if case.note:
+        lines += ["", case.note]
     lines.append("")
     return lines
 
