@@ -9,7 +9,7 @@ Analysis and Design 40, 1551–1569:
   P_max = 40 000, the octant carrying P/4;
 - ``scenes/shell_pinched_cylinder.yaml``: the pinched cylinder on rigid diaphragms (their 3.6),
   the scene's R, L, t, E set to theirs (R = 100, L = 200, t = 1, E = 3e4), P_max = 12 000, the
-  octant carrying P/4;
+  octant carrying P/4 (their points A and B are the scene's C and E);
 - ``scenes/shell_pinched_hemisphere.yaml``: the hemisphere with an 18° hole (their 3.4),
   P_max = 400, the quarter carrying P/2 at each load point.
 
@@ -42,6 +42,7 @@ from flexmb_core.scene.loader import parse_yaml
 from flexmb_core.simulator import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
+
 
 @dataclass
 class Case:

@@ -123,9 +123,10 @@ def _evaluate_lines(t, base, rate, acc, acc_end, t_ref, fade_t, fade_T, seg_t0, 
                     lengths, rates):
     """Commanded lengths (m) and rates (m/s) of every actuator at ``t`` into ``lengths, rates (na,)``:
     the line ``base + rate (t − t_ref)``, bent by the acceleration ``acc`` from ``t_ref`` to
-    ``acc_end`` (a bare stream's parabola, carried over a few lost samples) and straight after
-    (its rate fading linearly to 0 over ``fade_T`` from ``fade_t`` ≥ ``acc_end``, then frozen) and, while ``t < seg_end``, the hold segment from ``seg_p0`` (rate
-    ``seg_v0``) at ``seg_t0``: linear onto ``base``, or (``seg_cubic``) the cubic Hermite onto the
+    ``acc_end`` (the samples' parabola, carried over a few lost samples) and straight after (its
+    rate fading linearly to 0 over ``fade_T`` from ``fade_t`` ≥ ``acc_end``, then frozen) and,
+    while ``t < seg_end``, the hold segment from ``seg_p0`` (rate ``seg_v0``) at ``seg_t0``:
+    linear onto ``base``, or (``seg_cubic``) the cubic Hermite onto the
     line's length and rate at the segment's end. One call for what the node evaluates at every
     step and every command (numpy on six-element arrays cost ~20 µs of interpreter per call)."""
     for i in range(base.size):
@@ -451,7 +452,7 @@ class CommandSchedule:
         self.base = self.rest.copy()         # m, length at the reference time
         self.rate = np.zeros(na)             # m/s
         self.t_ref = np.zeros(na)            # s, reference time of base (the stamp)
-        self.acc = np.zeros(na)              # m/s², the line's bend after t_ref (a bare stream's parabola)
+        self.acc = np.zeros(na)              # m/s², the line's bend after t_ref (the samples' parabola)
         self.acc_end = np.zeros(na)          # s, … until then
         # the hold segment that joins the previous command to the line: [seg_t0, seg_end)
         self.seg_t0 = np.zeros(na)
