@@ -6,7 +6,6 @@ driven supports and the Chung–Hulbert form — and it declines what it does no
 with multipliers, which the Python path refuses)."""
 
 import copy
-import dataclasses
 import math
 
 import numpy as np
@@ -90,12 +89,20 @@ def test_chung_hulbert_with_multipliers_keeps_the_python_path_and_its_refusal():
     from pathlib import Path
 
     from flexmb_core.model.compile import compile_scene
-    from flexmb_core.scene import load_scene
+    from flexmb_core.scene import scene_from_dict
+    from flexmb_core.scene.loader import parse_yaml
     from flexmb_core.simulator import Simulator
 
-    model = compile_scene(load_scene(Path(__file__).resolve().parents[2] / "scenes" / "right_angle_cantilever.yaml"))
-    spec = dataclasses.replace(Simulator(model).spec, integrator="chung_hulbert")
-    assert "integrator chung_hulbert with multipliers" in NumbaStep.unsupported(model, spec)
+    path = Path(__file__).resolve().parents[2] / "scenes" / "right_angle_cantilever.yaml"
+    data = parse_yaml(path.read_text(), str(path))
+    data["solver"]["integrator"] = "chung_hulbert"
+    model = compile_scene(scene_from_dict(data, source=str(path)))
+    sim = Simulator(model)
+    assert "integrator chung_hulbert with multipliers" in NumbaStep.unsupported(model, sim.spec)
+    assert sim._dynamic.fast is None
+    sim.initialize()
+    with pytest.raises(ValueError, match="chung_hulbert integrator does not support rigid corners"):
+        sim.step()
     d = _b1()
     d["solver"].update(integrator="chung_hulbert")
     model, sim = build(d)
