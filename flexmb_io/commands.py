@@ -188,6 +188,13 @@ def _bound_joins(idx, now, a_max, h_max, base, rate, acc, t_ref, seg_p0, seg_v0,
 
 
 @njit(cache=True, nogil=True)
+def _grid_steps(h, grid):
+    """``h`` (s, > 0) between two unstamped samples as whole steps of their clock's ``grid`` (at
+    least one; more where samples were lost in between, :meth:`_Period.observe`), in s."""
+    return grid * max(1.0, round(h / grid))
+
+
+@njit(cache=True, nogil=True)
 def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, hist_n, hist_stamped, base, rate,
                    acc_out):
     """The parabola through each new sample ``lengths[j]`` (actuator ``idx[j]``, sample time ``tau``)
@@ -202,11 +209,10 @@ def _predict_lines(idx, lengths, tau, stamped, grid, T, dt1, hist_L, hist_t, his
         h2 = ht0 - ht1
         near = 2.5 * T
         if not stamped:
-            # whole grid steps apart (more than one where samples were lost: _Period.observe)
             if h1 > 0.0:
-                h1 = grid * max(1.0, round(h1 / grid))
+                h1 = _grid_steps(h1, grid)
             if h2 > 0.0:
-                h2 = grid * max(1.0, round(h2 / grid))
+                h2 = _grid_steps(h2, grid)
             near = max(near, (_MAX_LOST + 1.5) * grid)
         n = hist_n[i] if (hist_stamped[i] == stamped and h1 > 0.0 and h1 <= near) else 0
         if n == 2 and not (h2 > 0.0 and h2 <= near):
@@ -725,7 +731,7 @@ class CommandSchedule:
         for j, i in enumerate(idx):
             if self.hist_n[i] < 2 or self.hist_stamped[i]:
                 continue
-            h2 = grid * max(1.0, round((self.hist_t[i, 0] - self.hist_t[i, 1]) / grid))
+            h2 = _grid_steps(self.hist_t[i, 0] - self.hist_t[i, 1], grid)
             slope = (self.hist_L[i, 0] - self.hist_L[i, 1]) / h2
             step = lengths[j] - self.hist_L[i, 0]
             one += abs(step - slope * grid)
@@ -813,6 +819,7 @@ class CommandSchedule:
         _predict_lines(np.arange(na, dtype=np.int64), z, 0.0, False, self.dt, self.dt, 0.0, np.zeros((na, 2)),
                        np.zeros((na, 2)), zi.copy(), np.zeros(na, dtype=bool), np.zeros(na), np.zeros(na), np.zeros(na))
         _interval_stats(np.full(3, self.dt))
+        _grid_steps(self.dt, self.dt)
         _arrival_slope(np.arange(4.0), np.arange(4.0), 3, 3)
         _bound_joins(np.arange(na, dtype=np.int64), 0.0, 1.0, MAX_HOLD_PERIOD, z, z, np.zeros(na), z, z, z,
                      z + self.dt, np.zeros(na))
