@@ -1,6 +1,7 @@
 """The facade: ``Simulator(model)`` → ``initialize()`` → ``step()`` / ``run()``.
 
-It owns the :class:`State`, the :class:`Workspace` and the integrator, evaluates actuator
+It owns the :class:`~flexmb_core.model.step_data.StepData` (the run's one mutable object; its
+:class:`State` is ``sim.state``), the :class:`Workspace` and the integrator, evaluates actuator
 commands (scene signals, or lengths set from outside with :meth:`set_commands`) and keeps
 solver statistics. It never prints.
 """
@@ -19,7 +20,8 @@ from .integrators.dynamic import DynamicIntegrator
 from .integrators.static import StaticSolver
 from .model.assembly import assemble
 from .model.model import Model
-from .model.workspace import State, Workspace
+from .model.step_data import StepData
+from .model.workspace import Workspace
 from .observers import evaluate_output
 from .scene.schema import SolverSpec
 from .servo import Servo
@@ -48,7 +50,10 @@ class Simulator:
         self.model = model
         self.spec = spec or model.scene.solver
         self.ws = Workspace(model)
-        self.state = State.at_rest(model)
+        # the one mutable object of the run (state, stretch history, held tangent, guard ledger);
+        # ``state`` is its view, what a rollback restores is ``data`` (StepData.copy / assign)
+        self.data = StepData(model)
+        self.state = self.data.state
         self._override: np.ndarray | None = None
         act = model.actuators
         driven = set(model.program_index.tolist())
@@ -66,7 +71,7 @@ class Simulator:
             self._static = StaticSolver(model, self.ws, self.spec)
             self._dynamic = None
         else:
-            self._dynamic = DynamicIntegrator(model, self.ws, self.spec)
+            self._dynamic = DynamicIntegrator(model, self.ws, self.spec, self.data)
             self._static = None
 
     # -- commands -------------------------------------------------------------------------

@@ -166,7 +166,7 @@ class TwinRunner:
         if warmup and self.faults.active:
             self.faults.check(self.sim.state.q, np.zeros(0))      # compile the limits' kernels now
         self.sim.initialize()
-        self._backup = self.sim.state.copy()
+        self._backup = self.sim.data.copy()
         return self.sample()
 
     def reset(self) -> TwinSample:
@@ -252,7 +252,7 @@ class TwinRunner:
         sim, c = self.sim, self.counters
         if self.schedule is not None:
             sim.set_commands(self.schedule.lengths_at(t_new), check=False)   # validated on reception
-        self._backup.assign(sim.state)
+        self._backup.assign(sim.data)
         message = ""
         try:
             res = sim.step(self.dt)
@@ -264,12 +264,12 @@ class TwinRunner:
                 c.substepped_steps += 1
                 message = res.message
         except ConvergenceError as exc:
-            sim.state.assign(self._backup)
+            sim.data.assign(self._backup)
             c.last_message = f"step to t = {t_new:.6g} s rejected, state kept at t = {sim.state.t:.6g} s: {exc}"
             return None
         st = sim.state
         if not (np.isfinite(st.q).all() and np.isfinite(st.v).all()):
-            sim.state.assign(self._backup)
+            sim.data.assign(self._backup)
             c.last_message = f"step to t = {t_new:.6g} s produced non-finite values; state kept at t = {sim.state.t:.6g} s"
             return None
         if self.faults.active:
@@ -292,7 +292,7 @@ class TwinRunner:
             c.faults[f.kind] = c.faults.get(f.kind, 0) + 1
         text = "; ".join(f.detail for f in found)
         if self.faults.stop:
-            sim.state.assign(self._backup)
+            sim.data.assign(self._backup)
             c.stopped = (f"stopped at t = {sim.state.t:.6g} s (limits.on_violation: stop) — the step to "
                          f"t = {t_new:.6g} s was rolled back: {text}")
             c.last_message = c.stopped

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..model.assembly import apply_drives, assemble, assemble_constraints, update_load_scales
 from ..model.model import Model
+from ..model.step_data import C_T_HIST, C_T_PREV, T_AGE, T_COEF, T_COUNT, T_HELD, StepData
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
 from ..solvers.guard import StepGuard
@@ -57,10 +58,15 @@ def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
 
 
 class DynamicIntegrator:
-    """One implicit step at a time; owns the linear solver and scratch vectors."""
+    """One implicit step at a time; owns the linear solver and scratch vectors.
 
-    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec):
+    ``data``: the run's :class:`~flexmb_core.model.step_data.StepData` (default: its own). The
+    integrator steps ``data.state`` only; the stretch history, the held tangent's bookkeeping and
+    the guard's ledger are items of ``data``, so that a rollback of ``data`` restores them too."""
+
+    def __init__(self, model: Model, ws: Workspace, spec: SolverSpec, data: StepData | None = None):
         self.model = model
+        self.data = StepData(model) if data is None else data
         self.ws = ws
         self.spec = spec
         self.am, self.af, self.beta, self.gamma = alpha_parameters(spec)
@@ -81,16 +87,17 @@ class DynamicIntegrator:
         self._v_eval = np.zeros(n)
         self._damped = model.material_damping
         na = model.actuators.l0.size
-        self._lam_hist = np.zeros(na)       # λ_{n−1} at _t_prev, valid while state.t == _t_hist
-        self._lam_cand = np.zeros(na)       # λ_n of the step under way (history once it converges)
-        self._t_prev = 0.0
-        self._t_hist = math.nan
+        self._lam_hist = self.data.lam_hist     # λ_{n−1} at _t_prev, valid while state.t == _t_hist
+        self._lam_cand = self.data.lam_cand     # λ_n of the step under way (history once it converges)
+        self._clock = self.data.clock
         self._rf = np.zeros(model.nsys)
         self._nf = model.nfree
         # Held tangent: [held (0/1), its coefficient c_a + c_m c_v, age in steps, refreshes so far];
-        # an array that the numba step reads and writes in place (see the properties below).
-        self._tan = np.zeros(4)
-        self.guard = StepGuard(model, tolerance=spec.tolerance)
+        # an item of the step data that the numba step reads and writes in place (see the
+        # properties below).
+        self._tan = self.data.tan
+        self.guard = StepGuard(model, tolerance=spec.tolerance, ledger=(self.data.gvec, self.data.react,
+                                                                         self.data.led))
         # One numba call per step when it covers the model (bit-identical to _newton; None: the
         # Python path; set it to None to force that path).
         self.fast = None if NumbaStep.unsupported(model, spec) else NumbaStep(self)
@@ -99,48 +106,69 @@ class DynamicIntegrator:
     @property
     def _factored_coef(self) -> float | None:
         """Tangent coefficient of the held factorization, or None."""
-        return float(self._tan[1]) if self._tan[0] != 0.0 else None
+        return float(self._tan[T_COEF]) if self._tan[T_HELD] != 0.0 else None
 
     @_factored_coef.setter
     def _factored_coef(self, coef: float | None) -> None:
         if coef is None:
-            self._tan[0] = 0.0
+            self._tan[T_HELD] = 0.0
         else:
-            self._tan[0] = 1.0
-            self._tan[1] = coef
+            self._tan[T_HELD] = 1.0
+            self._tan[T_COEF] = coef
 
     @property
     def _tangent_age(self) -> int:
         """Steps since the last tangent refresh."""
-        return int(self._tan[2])
+        return int(self._tan[T_AGE])
 
     @_tangent_age.setter
     def _tangent_age(self, age: int) -> None:
-        self._tan[2] = age
+        self._tan[T_AGE] = age
 
     @property
     def tangent_updates(self) -> int:
         """Tangent refreshes so far."""
-        return int(self._tan[3])
+        return int(self._tan[T_COUNT])
 
     @tangent_updates.setter
     def tangent_updates(self, n: int) -> None:
-        self._tan[3] = n
+        self._tan[T_COUNT] = n
+
+    @property
+    def _t_prev(self) -> float:
+        """Time of λ_{n−1} in the stretch history (s)."""
+        return float(self._clock[C_T_PREV])
+
+    @_t_prev.setter
+    def _t_prev(self, t: float) -> None:
+        self._clock[C_T_PREV] = t
+
+    @property
+    def _t_hist(self) -> float:
+        """Time of the state the stretch history belongs to (s; NaN: none)."""
+        return float(self._clock[C_T_HIST])
+
+    @_t_hist.setter
+    def _t_hist(self, t: float) -> None:
+        self._clock[C_T_HIST] = t
 
     # -- start ------------------------------------------------------------------------------
     def warmup(self, state: State) -> None:
         """Compile (or load) every kernel a step calls — the numba step, or the Python Newton's
-        kernels and the step guard's — by one throwaway step on a copy of ``state``, so that none
-        compiles inside the time loop (a first real-time step would miss its deadline by seconds);
-        :meth:`initialize` then resets what it touched (held tangent, loads, the guard's ledger)."""
-        st = state.copy()
+        kernels and the step guard's — by one throwaway step from ``state``, so that none
+        compiles inside the time loop (a first real-time step would miss its deadline by seconds).
+        The step data is put back as it was, with no held tangent; :meth:`initialize` then forms
+        the loads and the guard's ledger."""
+        saved = self.data.copy()
+        st = self.data.state
+        st.assign(state)
         if self.fast is not None:
             self.fast.attempt(st, self.spec.dt, st.lam.copy())
             self.fast.invalidate()
         else:
             self.initialize(st)
             self._newton(st, self.spec.dt, st.lam.copy())
-        self._t_hist = math.nan             # no stretch history from the throwaway step
+        self.data.buf[:] = saved.buf
         self._factored_coef = None
         self._tangent_age = 0
         self.tangent_updates = 0

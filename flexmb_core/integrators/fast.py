@@ -29,6 +29,7 @@ from numba import njit
 
 from ..kernels.guard import dynamic_guard, frame_orientation
 from ..model.model import Model
+from ..model.step_data import D_A, D_ATIL, D_GVEC, D_LAM, D_LAMRATE, D_LED, D_MULT, D_Q, D_REACT, D_TAN, D_V
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
 from ..solvers.banded import _factor_kernel, _solve_kernel
@@ -38,7 +39,8 @@ from .fused import apply_increment, inertial_residual, update_rates, velocity_at
 from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
                     L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
                     L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
-                    L_QEVAL, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZSLOT, NF, N_PAR,
+                    L_QEVAL, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZLAM, L_ZSLOT, NF,
+                    N_PAR,
                     P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA,
                     P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE,
                     P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1, view2)
@@ -52,30 +54,40 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, 
 
 
 @njit(cache=True, nogil=True)
-def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_stats, gvec, react, cf, ci, wf, wi,
-               lay, tan, led, io, t_n, dt, guarded, balance):
+def model_step(d, dlay, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, io, t_n, dt, guarded, balance):
     """First Newton attempt of one dynamic step (see the module).
 
-    State ``q, v, a, atil (ndof,)`` and the multipliers ``mult (nmult,)`` are advanced in place on
-    success and left unchanged otherwise. ``lam, lam_rate (na,)``: the actuator stretches
-    λ_{n+1} and their rates (1/s, read by damped elements only), set by the caller. ``balance``:
-    the step moves no actuator, so the guard's energy balance (check 3) applies. The GIL is
-    released: a caller's other threads (the node's executor) run while the step does. Shared
-    with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller), ``r`` (internal
-    force of the last evaluation), the skyline factors ``env, inv_diag, lu_stats`` (the held
-    tangent) and the step guard's ledger rows ``gvec, react``. Everything else comes in the
-    packs ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes
-    the driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
-
-    ``tan`` in/out: the integrator's held tangent [held, coefficient, age, refreshes]; ``led``
+    ``d``: the buffer of the run's :class:`~flexmb_core.model.step_data.StepData`, ``dlay`` its
+    layout table. Its state ``q, v, a, atil (ndof,)`` and the multipliers ``mult (nmult,)`` are
+    advanced in place on success and left unchanged otherwise. Its ``lam, lam_rate (na,)``: the
+    actuator stretches λ_{n+1} and their rates (1/s, read by damped elements only), set by the
+    caller. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
     in/out: the guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is
-    accepted); ``t_n, dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
+    accepted) with its rows ``gvec, react``. ``balance``: the step moves no actuator, so the
+    guard's energy balance (check 3) applies. The GIL is released: a caller's other threads (the
+    node's executor) run while the step does. Shared with the Python path: ``f_ext`` (loads at
+    t_{n+1}, set by the caller), ``r`` (internal force of the last evaluation) and the skyline
+    factors ``env, inv_diag, lu_stats`` (the held tangent). Everything else comes in the packs
+    ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes the
+    driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
+
+    ``t_n, dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
     iterations, relative residual, increment, strain, kinetic and gravity energy, the guard's
     values (x, y, e_end, aux: element of an inverted section or the energy check's code, and the
     frame group of that section) and the strain energy at the Newton start.
 
     Returns one of the codes ``OK, NO_CONVERGENCE, …, ENERGY``.
     """
+    q = view1(d, dlay[D_Q])
+    v = view1(d, dlay[D_V])
+    a = view1(d, dlay[D_A])
+    atil = view1(d, dlay[D_ATIL])
+    lam = view1(d, dlay[D_LAM])
+    mult = view1(d, dlay[D_MULT])
+    tan = view1(d, dlay[D_TAN])
+    led = view1(d, dlay[D_LED])
+    gvec = view2(d, dlay[D_GVEC])
+    react = view2(d, dlay[D_REACT])
     par = view1(cf, lay[L_PAR])
     free = view1(ci, lay[L_FREE])
     m_indptr = view1(ci, lay[L_MI])
@@ -111,6 +123,8 @@ def model_step(q, v, a, atil, lam, lam_rate, mult, f_ext, r, env, inv_diag, lu_s
     pivot_tol = par[P_PIVTOL]
     min_pivot_ratio = par[P_MINPIV]
     damped = par[P_DAMPED] != 0.0
+    # undamped: the elements read no stretch rate (a zero item, whatever the state's rates hold)
+    lam_rate = view1(d, dlay[D_LAMRATE]) if damped else view1(wf, lay[L_ZLAM])
     nmult = int(par[P_NMULT])
     nfg = int(par[P_NFG])
     f0 = int(par[P_F0])
@@ -382,8 +396,8 @@ class NumbaStep:
         na = m.actuators.l0.size
         self._lam_n = np.zeros(na)          # λ_n and its rate at the step's start (restored on failure)
         self._rate_n = np.zeros(na)
-        self._zero_rate = np.zeros(na)      # undamped: the elements read no stretch rate
-        self._shared = (ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats)
+        self._data = integ.data
+        self._shared = (integ.data.buf, integ.data.lay, ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats)
         self._signals = m.load_signals
         self._scales = np.full(len(m.load_signals), math.nan)
         self._g_scale = math.nan
@@ -405,7 +419,7 @@ class NumbaStep:
         """``f_ext`` and the moment scales at ``t`` as
         :func:`~flexmb_core.model.assembly.update_load_scales` forms them (the same operations:
         bit-identical), ``f_ext`` recomputed only when a signal changed."""
-        if self._still:
+        if self._still and t >= self._still_after:     # (a rolled-back run may come back before it)
             return
         m, ws = self.model, self.integ.ws
         mo = m.moments
@@ -440,7 +454,10 @@ class NumbaStep:
         stretches ``lam_new`` (rates ``lam_rate`` or, for damped models, the integrator's backward
         difference): the result (state advanced when converged, unchanged otherwise), or ``None``
         when the integrator's Python path must make the attempt (a held SuperLU factorization, a
-        pivot for SuperLU)."""
+        pivot for SuperLU). ``state``: the state of the integrator's step data, the only one a
+        step advances."""
+        if state is not self._data.state:
+            raise ValueError("the numba step advances the state of its integrator's step data only")
         integ = self.integ
         lu = integ.lu
         tan = integ._tan
@@ -455,15 +472,13 @@ class NumbaStep:
         ch = integ.spec.integrator == "chung_hulbert"
         # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
         balance = not integ.set_stretches(state, dt, lam_new, lam_rate) and not ch
-        rates = state.lam_rate if integ._damped else self._zero_rate
         t_new = t_n + dt
         self.loads(t_new - integ.af * dt if ch else t_new)
         self.packs.drives(state.q, t_n + dt)
-        f_ext, r, env, inv_diag, stats = self._shared
+        d, dlay, f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = model_step(state.q, state.v, state.a, state.atil, lam, rates, state.mult, f_ext, r, env, inv_diag,
-                          stats, guard._gvec, guard._react, cf, ci, wf, wi, self._lay, tan, guard._led, self._io, t_n,
-                          dt, guard.enabled, balance)
+        code = model_step(d, dlay, f_ext, r, env, inv_diag, stats, cf, ci, wf, wi, self._lay, self._io, t_n, dt,
+                          guard.enabled, balance)
         if tan[0] != 0.0:
             lu._active = lu.skyline
             lu.skyline._factored = True

@@ -59,6 +59,7 @@ from ..kernels.guard import (conservative_moment_work, drive_reactions, dynamic_
 from ..kernels.moments import follower_moments
 from ..model.model import Model
 from ..model.shape import gauss_legendre, lagrange_1d
+from ..model.step_data import drive_dof_ids
 
 #: Lowest fibre stretch accepted: the compressive limit point of Saint-Venant–Kirchhoff.
 SVK_LIMIT_STRETCH = 1.0 / math.sqrt(3.0)
@@ -75,6 +76,9 @@ class StepGuard:
     rise_tolerance : float — relative rise of the incremental potential that is refused.
     balance_tolerance : float — relative energy gain (beyond the work done) that is refused.
     enabled : bool — False turns every check off (diagnostics only: spurious roots get through).
+    ledger : (gvec (6, ndof), react (2, nd), led (5,)) — where the energy ledger of dynamics lives:
+        the items of the run's :class:`~flexmb_core.model.step_data.StepData`, so that it rolls
+        back with the state (default: arrays of its own, for statics).
 
     Attributes
     ----------
@@ -85,7 +89,8 @@ class StepGuard:
     """
 
     def __init__(self, model: Model, *, tolerance: float = 1e-9, rise_tolerance: float = 1e-2,
-                 balance_tolerance: float = 0.5, enabled: bool = True):
+                 balance_tolerance: float = 0.5, enabled: bool = True,
+                 ledger: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
         self.model = model
         self.tolerance = tolerance
         self.rise_tolerance = rise_tolerance
@@ -106,15 +111,12 @@ class StepGuard:
         # candidate end state of the step under way at 3 − ``_il`` — then the last Newton
         # iterate and scratch; ``_react`` rows: ledger ``_ir``, candidate 1 − ``_ir``. An
         # accepted step flips the indices (no copies).
-        d = model.drives
-        ids = [] if d is None else [d.y_ids.ravel(), d.v_ids.ravel()]
-        self._drive_ids = (np.unique(np.concatenate(ids)).astype(np.int64) if ids
-                           else np.zeros(0, dtype=np.int64))
+        self._drive_ids = drive_dof_ids(model)
         nd = self._drive_ids.size
-        self._gvec = np.zeros((6, n))
-        self._react = np.zeros((2, nd))
+        if ledger is None:
+            ledger = (np.zeros((6, n)), np.zeros((2, nd)), np.array([0.0, 0.0, math.nan, 0.0, 0.0]))
         # [il, ir, t, K + U, candidate K + U]: an array that the numba step reads and writes
-        self._led = np.array([0.0, 0.0, math.nan, 0.0, 0.0])
+        self._gvec, self._react, self._led = ledger
         self._saved = (math.nan, 0.0)
         self._saved_rows = np.zeros((3, n))
         self._saved_react = np.zeros(nd)
