@@ -29,17 +29,18 @@ from numba import njit
 
 from ..kernels.guard import dynamic_guard, frame_orientation
 from ..model.model import Model
-from ..model.step_data import D_A, D_ATIL, D_GVEC, D_LAM, D_LAMRATE, D_LED, D_MULT, D_Q, D_REACT, D_TAN, D_V
+from ..model.step_data import (C_T, C_T_HIST, C_T_PREV, D_A, D_ATIL, D_CLOCK, D_GVEC, D_LAM, D_LAMCAND, D_LAMHIST,
+                               D_LAMRATE, D_LED, D_MULT, D_Q, D_REACT, D_TAN, D_V)
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
 from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies
-from .fused import apply_increment, inertial_residual, update_rates, velocity_at
+from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
 from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
                     L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
-                    L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
-                    L_QEVAL, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZLAM, L_ZSLOT, NF,
+                    L_LAMN, L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
+                    L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZLAM, L_ZSLOT, NF,
                     N_PAR,
                     P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA,
                     P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE,
@@ -54,30 +55,37 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, 
 
 
 @njit(cache=True, nogil=True)
-def model_step(d, dlay, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, io, t_n, dt, guarded, balance):
-    """First Newton attempt of one dynamic step (see the module).
+def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, io, dt,
+               guarded):
+    """First Newton attempt of one dynamic step from the time ``t_n`` of the step data (see the
+    module).
 
     ``d``: the buffer of the run's :class:`~flexmb_core.model.step_data.StepData`, ``dlay`` its
-    layout table. Its state ``q, v, a, atil (ndof,)`` and the multipliers ``mult (nmult,)`` are
-    advanced in place on success and left unchanged otherwise. Its ``lam, lam_rate (na,)``: the
-    actuator stretches λ_{n+1} and their rates (1/s, read by damped elements only), set by the
-    caller. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
+    layout table. Its time, its state ``q, v, a, atil (ndof,)`` and the multipliers ``mult
+    (nmult,)`` are advanced in place on success and left unchanged otherwise. Its ``lam (na,)``
+    takes the actuator stretches ``lam_new`` (λ_{n+1}) and, for damped models, its ``lam_rate``
+    their rate (1/s): ``rate_new (na,)`` when ``rate_given``, else the
+    backward difference over the stretch history (``DynamicIntegrator.set_stretches``), which
+    moves on when the step is accepted (``accept_stretches``); a failed step leaves λ_n and its
+    rate. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
     in/out: the guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is
-    accepted) with its rows ``gvec, react``. ``balance``: the step moves no actuator, so the
-    guard's energy balance (check 3) applies. The GIL is released: a caller's other threads (the
+    accepted) with its rows ``gvec, react``. The guard's energy balance (check 3) applies to steps
+    that move no actuator. The GIL is released: a caller's other threads (the
     node's executor) run while the step does. Shared with the Python path: ``f_ext`` (loads at
     t_{n+1}, set by the caller), ``r`` (internal force of the last evaluation) and the skyline
     factors ``env, inv_diag, lu_stats`` (the held tangent). Everything else comes in the packs
     ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes the
     driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
 
-    ``t_n, dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
+    ``dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
     iterations, relative residual, increment, strain, kinetic and gravity energy, the guard's
     values (x, y, e_end, aux: element of an inverted section or the energy check's code, and the
     frame group of that section) and the strain energy at the Newton start.
 
     Returns one of the codes ``OK, NO_CONVERGENCE, …, ENERGY``.
     """
+    clock = view1(d, dlay[D_CLOCK])
+    t_n = clock[C_T]
     q = view1(d, dlay[D_Q])
     v = view1(d, dlay[D_V])
     a = view1(d, dlay[D_A])
@@ -124,7 +132,8 @@ def model_step(d, dlay, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, 
     min_pivot_ratio = par[P_MINPIV]
     damped = par[P_DAMPED] != 0.0
     # undamped: the elements read no stretch rate (a zero item, whatever the state's rates hold)
-    lam_rate = view1(d, dlay[D_LAMRATE]) if damped else view1(wf, lay[L_ZLAM])
+    state_rate = view1(d, dlay[D_LAMRATE])
+    lam_rate = state_rate if damped else view1(wf, lay[L_ZLAM])
     nmult = int(par[P_NMULT])
     nfg = int(par[P_NFG])
     f0 = int(par[P_F0])
@@ -133,6 +142,23 @@ def model_step(d, dlay, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, 
     # rates blended alike), tangent (1−αf) K + (1−αm)/(βΔt²) M
     ch = par[P_CH] != 0.0
     q_eval = view1(wf, lay[L_QEVAL])
+    # -- the actuator stretches λ_{n+1} and their rate (DynamicIntegrator.set_stretches) ----------
+    lam_n = view1(wf, lay[L_LAMN])
+    rate_n = view1(wf, lay[L_RATEN])
+    for i in range(lam.size):           # the step's start, restored if the attempt fails
+        lam_n[i] = lam[i]
+        rate_n[i] = state_rate[i]
+    difference = damped and not rate_given
+    if damped and rate_given:
+        for i in range(lam.size):
+            state_rate[i] = rate_new[i]
+    h0 = 0.0
+    if difference and t_n == clock[C_T_HIST]:
+        h0 = t_n - clock[C_T_PREV]
+    moved = advance_stretches(lam_new, lam, view1(d, dlay[D_LAMHIST]), view1(d, dlay[D_LAMCAND]), state_rate, dt,
+                              h0, difference, damped)
+    # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
+    balance = not moved and not ch
 
     # -- predictor (Python path: DynamicIntegrator._newton) -------------------------------------
     n = q.size
@@ -331,7 +357,21 @@ def model_step(d, dlay, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, 
                 atil[i] = at_n[i]
             for i in range(nmult):
                 mult[i] = mult_n[i]
+        if code != PIVOT and par[P_KEEP] != 0.0:
+            clock[C_T] = t_n + dt  # the failed iterate at t_{n+1}, λ_{n+1} in force (accept_flagged)
+        else:
+            for i in range(lam.size):
+                lam[i] = lam_n[i]
+                state_rate[i] = rate_n[i]
         return code
+    clock[C_T] = t_n + dt
+    if damped:                     # λ_n joins the stretch history (DynamicIntegrator.accept_stretches)
+        lam_hist = view1(d, dlay[D_LAMHIST])
+        lam_cand = view1(d, dlay[D_LAMCAND])
+        for i in range(lam.size):
+            lam_hist[i] = lam_cand[i]
+        clock[C_T_PREV] = t_n
+        clock[C_T_HIST] = t_n + dt
     tan[2] += 1.0
     if guarded:                    # the guard's ledger moves to the accepted state (ledger_accept)
         led[2] = t_n + dt
@@ -386,17 +426,16 @@ class NumbaStep:
         par[P_DAMPED] = bool(m.material_damping)
         par[P_CH] = spec.integrator == "chung_hulbert"
         # accept_flagged keeps a failed attempt's last iterate, as the Python path leaves it
-        self._keep_failed = spec.on_unconverged == "accept_flagged"
-        par[P_KEEP] = self._keep_failed
+        par[P_KEEP] = spec.on_unconverged == "accept_flagged"
         self.packs = ModelPacks(m, ws, sky, guard, integ._inv_scale, integ._mass, integ._mass_blocks, par)
         self._lay = self.packs.lay
         self._packs = self.packs.packs
         self._follower_scale, self._cons_scale = self.packs.follower_scale, self.packs.cons_scale
         self._io = np.zeros(N_IO)
         na = m.actuators.l0.size
-        self._lam_n = np.zeros(na)          # λ_n and its rate at the step's start (restored on failure)
-        self._rate_n = np.zeros(na)
         self._data = integ.data
+        self._ch = spec.integrator == "chung_hulbert"
+        self._no_rate = np.zeros(na)        # the rates argument when the caller gives none
         self._shared = (integ.data.buf, integ.data.lay, ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats)
         self._signals = m.load_signals
         self._scales = np.full(len(m.load_signals), math.nan)
@@ -460,39 +499,24 @@ class NumbaStep:
             raise ValueError("the numba step advances the state of its integrator's step data only")
         integ = self.integ
         lu = integ.lu
-        tan = integ._tan
-        if tan[0] != 0.0 and lu._active is not lu.skyline:
+        if integ._tan[0] != 0.0 and lu._active is not lu.skyline:
             return None                 # a held SuperLU factorization: the Python path reuses it
-        guard = integ.guard
+        rate_given = lam_rate is not None
         t_n = state.t
-        lam = state.lam
-        if lam.size:                    # the step's start, restored if the attempt fails
-            self._lam_n[:] = lam
-            self._rate_n[:] = state.lam_rate
-        ch = integ.spec.integrator == "chung_hulbert"
-        # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
-        balance = not integ.set_stretches(state, dt, lam_new, lam_rate) and not ch
         t_new = t_n + dt
-        self.loads(t_new - integ.af * dt if ch else t_new)
-        self.packs.drives(state.q, t_n + dt)
+        self.loads(t_new - integ.af * dt if self._ch else t_new)
+        self.packs.drives(state.q, t_new)
         d, dlay, f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = model_step(d, dlay, f_ext, r, env, inv_diag, stats, cf, ci, wf, wi, self._lay, self._io, t_n, dt,
-                          guard.enabled, balance)
-        if tan[0] != 0.0:
+        code = model_step(d, dlay, lam_new, lam_rate if rate_given else self._no_rate, rate_given, f_ext, r, env,
+                          inv_diag, stats, cf, ci, wf, wi, self._lay, self._io, dt, integ.guard.enabled)
+        if integ._tan[0] != 0.0:
             lu._active = lu.skyline
             lu.skyline._factored = True
         it, rel, inc, strain, kin, grav = self._io[:IO_X].tolist()
         integ.ws.dissipation = self._io[IO_DISS]
         if code == OK:
-            state.t = t_n + dt
-            integ.accept_stretches(t_n, t_n + dt)
             return StepResult(True, int(it), rel, inc, 1, kin, strain, grav)
-        if self._keep_failed and code != PIVOT:
-            state.t = t_n + dt          # the failed iterate at t_{n+1}, λ_{n+1} in force (accept_flagged)
-        elif lam.size:                  # the step's start, for the integrator's policy
-            lam[:] = self._lam_n
-            state.lam_rate[:] = self._rate_n
         return self._failure(code, int(it), rel, inc, strain, kin, grav)
 
     def _failure(self, code: int, it: int, rel: float, inc: float, strain: float, kin: float,

@@ -37,9 +37,9 @@ from ..model.model import Model, TrussGroup
  L_FVDOFS, L_FSMAP, L_MVDOFS, L_MSMAP, L_DRVIDX, L_BI, L_BJ, L_FPOS,                          # ci
  L_INVS, L_MASSK, L_VEVAL, L_WBUF, L_RF, L_DQ, L_KDATA, L_IVEC, L_LUWORK, L_TQE, L_TVE, L_TRE, L_TKE,
  L_SDV, L_SDFA, L_SF, L_SBMAT, L_SCB, L_SQE, L_SRE, L_SKE, L_CKE, L_HKE, L_TIEKE, L_RC, L_CP, L_MULTN,
- L_FSCALE, L_MSCALE, L_RM, L_QL, L_KDUMMY, L_DRVVAL, L_ZLAM, L_QEVAL,                                 # wf
+ L_FSCALE, L_MSCALE, L_RM, L_QL, L_KDUMMY, L_DRVVAL, L_ZLAM, L_QEVAL, L_LAMN, L_RATEN,                 # wf
  L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_DRIVE,   # wi
- N_ITEMS) = range(84)
+ N_ITEMS) = range(86)
 # Items of one frame group (rows F0 + k·NF + item).
 (F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
  F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
@@ -281,7 +281,8 @@ class ModelPacks:
                           (L_FSCALE, np.ones(mo.follower_vdofs.shape[0])), (L_MSCALE, np.ones(mo.cons_vdofs.shape[0])),
                           (L_RM, np.zeros(n)), (L_QL, np.zeros(n)), (L_KDUMMY, np.zeros(0)),
                           (L_DRVVAL, np.zeros(drive_ids.size)), (L_ZLAM, np.zeros(m.actuators.l0.size)),
-                          (L_QEVAL, np.zeros(n))):
+                          (L_QEVAL, np.zeros(n)), (L_LAMN, np.zeros(m.actuators.l0.size)),
+                          (L_RATEN, np.zeros(m.actuators.l0.size))):
             wf.add(item, arr)
         for item, arr in zip(range(L_SDV, L_SKE + 1), shell_scratch()):
             wf.add(item, arr)
