@@ -63,9 +63,9 @@ class TwinClient:
                     for t in T.INPUTS}
         outputs = (T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE, T.ACTUATOR_STATES, T.CLOCK, T.SHAPE, T.DIAGNOSTICS)
         self.received: dict[str, list] = {t.name: [] for t in outputs}
-        for t in outputs:
-            self.node.create_subscription(message_class(t.type), t.resolved(twin),
-                                          lambda m, _n=t.name: self.received[_n].append(m), qos)
+        self._subs = {t.name: self.node.create_subscription(message_class(t.type), t.resolved(twin),
+                                                            lambda m, _n=t.name: self.received[_n].append(m), qos)
+                      for t in outputs}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
@@ -84,6 +84,15 @@ class TwinClient:
         self.spin_until(lambda: self.received[self.T.STATUS.name]
                         and all(p.get_subscription_count() > 0 for p in self.pub.values()),
                         timeout, "the twin node to come up", node)
+
+    def unsubscribe(self, *topics) -> None:
+        """Stop taking these outputs (what arrived stays in ``received``): a client that streams
+        commands at 1 kHz in Python cannot also deserialize the twin's 1 kHz answers and keep its
+        own ticks."""
+        for t in topics:
+            sub = self._subs.pop(t.name, None)
+            if sub is not None:
+                self.node.destroy_subscription(sub)
 
     def statuses(self):
         return self.received[self.T.STATUS.name]
