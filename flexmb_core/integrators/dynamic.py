@@ -31,7 +31,7 @@ import numpy as np
 
 from ..model.assembly import apply_drives, assemble, assemble_constraints, update_load_scales
 from ..model.model import Model
-from ..model.step_data import C_T_HIST, C_T_PREV, T_AGE, T_COEF, T_COUNT, T_HELD, StepData
+from ..model.step_data import T_AGE, T_COEF, T_COUNT, T_HELD, StepData
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
 from ..solvers.guard import StepGuard
@@ -39,8 +39,8 @@ from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
 from .energy import compact_csr, csr_matvec, energies, mass_blocks
-from .fast import NumbaStep
-from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
+from .fast import NumbaStep, accept_stretches, begin_stretches
+from .fused import apply_increment, inertial_residual, update_rates, velocity_at
 
 
 def alpha_parameters(spec: SolverSpec) -> tuple[float, float, float, float]:
@@ -85,11 +85,8 @@ class DynamicIntegrator:
         self._w = np.zeros(n)
         self._q_eval = np.zeros(n)
         self._v_eval = np.zeros(n)
-        self._damped = model.material_damping
-        na = model.actuators.l0.size
-        self._lam_hist = self.data.lam_hist     # λ_{n−1} at _t_prev, valid while state.t == _t_hist
-        self._lam_cand = self.data.lam_cand     # λ_n of the step under way (history once it converges)
-        self._clock = self.data.clock
+        self._damped = bool(model.material_damping)
+        self._no_rate = np.zeros(model.actuators.l0.size)   # the rates argument when none is given
         self._rf = np.zeros(model.nsys)
         self._nf = model.nfree
         # Held tangent: [held (0/1), its coefficient c_a + c_m c_v, age in steps, refreshes so far];
@@ -133,24 +130,6 @@ class DynamicIntegrator:
     @tangent_updates.setter
     def tangent_updates(self, n: int) -> None:
         self._tan[T_COUNT] = n
-
-    @property
-    def _t_prev(self) -> float:
-        """Time of λ_{n−1} in the stretch history (s)."""
-        return float(self._clock[C_T_PREV])
-
-    @_t_prev.setter
-    def _t_prev(self, t: float) -> None:
-        self._clock[C_T_PREV] = t
-
-    @property
-    def _t_hist(self) -> float:
-        """Time of the state the stretch history belongs to (s; NaN: none)."""
-        return float(self._clock[C_T_HIST])
-
-    @_t_hist.setter
-    def _t_hist(self, t: float) -> None:
-        self._clock[C_T_HIST] = t
 
     # -- start ------------------------------------------------------------------------------
     def warmup(self, state: State) -> None:
@@ -213,6 +192,8 @@ class DynamicIntegrator:
         retried in 2, 4, … sub-steps (policy ``substep``) with the stretches interpolated linearly
         (and backward differences); ``state`` is left unchanged if nothing converges.
         """
+        if state is not self.data.state:
+            raise ValueError("the integrator advances the state of its step data only (sim.state)")
         if self._backup is None:
             self._backup = state.copy()
         res = self.fast.attempt(state, dt, lam_new, lam_rate) if self.fast is not None else None
@@ -237,25 +218,13 @@ class DynamicIntegrator:
             self.guard.ledger_restore()
         return res
 
-    def set_stretches(self, state: State, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None) -> bool:
-        """λ_{n+1} into ``state.lam`` and, for damped models, its rate λ̇_{n+1} into
-        ``state.lam_rate`` (given, or the backward difference over the stretch history); λ_n is
-        kept as the history's candidate. Returns whether any actuator moves in the step."""
-        difference = self._damped and lam_rate is None
-        h0 = 0.0
-        if difference:
-            t_n = state.t
-            h0 = t_n - self._t_prev if t_n == self._t_hist else 0.0
-        elif self._damped:
-            state.lam_rate[:] = lam_rate
-        return advance_stretches(lam_new, state.lam, self._lam_hist, self._lam_cand, state.lam_rate, dt, h0,
-                                 difference, self._damped)
-
-    def accept_stretches(self, t_n: float, t_new: float) -> None:
-        """The step t_n → t_new was accepted: λ_n joins the stretch history (damped models)."""
-        if self._damped:
-            self._lam_hist[:] = self._lam_cand
-            self._t_prev, self._t_hist = t_n, t_new
+    def set_stretches(self, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None) -> bool:
+        """λ_{n+1} into the state's ``lam`` and, for damped models, its rate λ̇_{n+1} into
+        ``lam_rate`` (given, or the backward difference over the stretch history): the numba
+        step's :func:`~.fast.begin_stretches`. Returns whether any actuator moves in the step."""
+        given = lam_rate is not None
+        return begin_stretches(self.data.buf, self.data.lay, lam_new, lam_rate if given else self._no_rate, given,
+                               self._damped, dt)
 
     def _piece(self, state: State, dt: float, lam_new: np.ndarray, k: int) -> StepResult:
         """Sub-step ``k`` of a split step (each split starts again from the step's start)."""
@@ -289,7 +258,7 @@ class DynamicIntegrator:
         t_new = state.t + dt
         damped = self._damped
         t_n = state.t
-        lam_moved = self.set_stretches(state, dt, lam_new, lam_rate)
+        lam_moved = self.set_stretches(dt, lam_new, lam_rate)
         ch = spec.integrator == "chung_hulbert"
         if ch and m.n_multipliers:
             raise ValueError("the chung_hulbert integrator does not support rigid corners (multipliers)")
@@ -395,7 +364,7 @@ class DynamicIntegrator:
                 return StepResult(False, it, rel, inc, 1, kin, strain, grav, message=message, guard=guard)
             return StepResult(False, it, rel, inc, 1, message=message)
         self._tangent_age += 1
-        self.accept_stretches(t_n, t_new)
+        accept_stretches(self.data.buf, self.data.lay, t_n, t_new, self._damped)
         # Energies and residual are those of the last evaluated iterate: the accepted q differs from
         # it by one increment ≤ tolerance (saves a residual assembly per step).
         if guarded:

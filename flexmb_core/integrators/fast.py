@@ -39,12 +39,12 @@ from .energy import _energies
 from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
 from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
                     L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
-                    L_LAMN, L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_PERM, L_Q0,
-                    L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF, L_ZLAM, L_ZSLOT, NF,
-                    N_PAR,
-                    P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA,
-                    P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE,
-                    P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed, unknown_fields, view1, view2)
+                    L_LAMN, L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR,
+                    L_PERM, L_Q0, L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF,
+                    L_ZLAM, L_ZSLOT, NF, N_PAR, P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS,
+                    P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA, P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV,
+                    P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed,
+                    moment_work_packed, unknown_fields, view1, view2)
 
 # Return codes of model_step.
 OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
@@ -52,6 +52,42 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, 
 # Output slots of io.
 (IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, IO_GROUP,
  N_IO) = range(14)
+
+
+@njit(cache=True, nogil=True)
+def begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt):
+    """λ_{n+1} = ``lam_new (na,)`` into the stretches of the step data ``d`` (layout ``dlay``),
+    which hold λ_n on entry, and for ``damped`` models its rate λ̇_{n+1} (1/s) into its rates:
+    ``rate_new (na,)`` when ``rate_given``, else the second-order backward difference over the
+    stretch history (first order when the history is not that of the data's time, e.g. the first
+    step after a start); λ_n is kept as the history's candidate. Returns whether any actuator
+    moves in the step ``dt`` (s). The numba step and the Python path both call it."""
+    clock = view1(d, dlay[D_CLOCK])
+    rate = view1(d, dlay[D_LAMRATE])
+    t_n = clock[C_T]
+    if damped and rate_given:
+        for i in range(rate.size):
+            rate[i] = rate_new[i]
+    difference = damped and not rate_given
+    h0 = 0.0
+    if difference and t_n == clock[C_T_HIST]:
+        h0 = t_n - clock[C_T_PREV]
+    return advance_stretches(lam_new, view1(d, dlay[D_LAM]), view1(d, dlay[D_LAMHIST]), view1(d, dlay[D_LAMCAND]),
+                             rate, dt, h0, difference, damped)
+
+
+@njit(cache=True, nogil=True)
+def accept_stretches(d, dlay, t_n, t_new, damped):
+    """The step ``t_n → t_new`` (s) was accepted: for ``damped`` models λ_n joins the stretch
+    history of the step data ``d`` (layout ``dlay``), which now belongs to the state at ``t_new``."""
+    if damped:
+        lam_hist = view1(d, dlay[D_LAMHIST])
+        lam_cand = view1(d, dlay[D_LAMCAND])
+        for i in range(lam_hist.size):
+            lam_hist[i] = lam_cand[i]
+        clock = view1(d, dlay[D_CLOCK])
+        clock[C_T_PREV] = t_n
+        clock[C_T_HIST] = t_new
 
 
 @njit(cache=True, nogil=True)
@@ -65,9 +101,8 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     (nmult,)`` are advanced in place on success and left unchanged otherwise. Its ``lam (na,)``
     takes the actuator stretches ``lam_new`` (λ_{n+1}) and, for damped models, its ``lam_rate``
     their rate (1/s): ``rate_new (na,)`` when ``rate_given``, else the
-    backward difference over the stretch history (``DynamicIntegrator.set_stretches``), which
-    moves on when the step is accepted (``accept_stretches``); a failed step leaves λ_n and its
-    rate. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
+    backward difference over the stretch history (:func:`begin_stretches`), which moves on when
+    the step is accepted (:func:`accept_stretches`); a failed step leaves λ_n and its rate. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
     in/out: the guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is
     accepted) with its rows ``gvec, react``. The guard's energy balance (check 3) applies to steps
     that move no actuator. The GIL is released: a caller's other threads (the
@@ -142,21 +177,13 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     # rates blended alike), tangent (1−αf) K + (1−αm)/(βΔt²) M
     ch = par[P_CH] != 0.0
     q_eval = view1(wf, lay[L_QEVAL])
-    # -- the actuator stretches λ_{n+1} and their rate (DynamicIntegrator.set_stretches) ----------
+    # -- the actuator stretches λ_{n+1} and their rate ----------------------------------------------
     lam_n = view1(wf, lay[L_LAMN])
     rate_n = view1(wf, lay[L_RATEN])
     for i in range(lam.size):           # the step's start, restored if the attempt fails
         lam_n[i] = lam[i]
         rate_n[i] = state_rate[i]
-    difference = damped and not rate_given
-    if damped and rate_given:
-        for i in range(lam.size):
-            state_rate[i] = rate_new[i]
-    h0 = 0.0
-    if difference and t_n == clock[C_T_HIST]:
-        h0 = t_n - clock[C_T_PREV]
-    moved = advance_stretches(lam_new, lam, view1(d, dlay[D_LAMHIST]), view1(d, dlay[D_LAMCAND]), state_rate, dt,
-                              h0, difference, damped)
+    moved = begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt)
     # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
     balance = not moved and not ch
 
@@ -365,13 +392,7 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
                 state_rate[i] = rate_n[i]
         return code
     clock[C_T] = t_n + dt
-    if damped:                     # λ_n joins the stretch history (DynamicIntegrator.accept_stretches)
-        lam_hist = view1(d, dlay[D_LAMHIST])
-        lam_cand = view1(d, dlay[D_LAMCAND])
-        for i in range(lam.size):
-            lam_hist[i] = lam_cand[i]
-        clock[C_T_PREV] = t_n
-        clock[C_T_HIST] = t_n + dt
+    accept_stretches(d, dlay, t_n, t_n + dt, damped)
     tan[2] += 1.0
     if guarded:                    # the guard's ledger moves to the accepted state (ledger_accept)
         led[2] = t_n + dt
@@ -433,7 +454,6 @@ class NumbaStep:
         self._follower_scale, self._cons_scale = self.packs.follower_scale, self.packs.cons_scale
         self._io = np.zeros(N_IO)
         na = m.actuators.l0.size
-        self._data = integ.data
         self._ch = spec.integrator == "chung_hulbert"
         self._no_rate = np.zeros(na)        # the rates argument when the caller gives none
         self._shared = (integ.data.buf, integ.data.lay, ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats)
@@ -494,9 +514,7 @@ class NumbaStep:
         difference): the result (state advanced when converged, unchanged otherwise), or ``None``
         when the integrator's Python path must make the attempt (a held SuperLU factorization, a
         pivot for SuperLU). ``state``: the state of the integrator's step data, the only one a
-        step advances."""
-        if state is not self._data.state:
-            raise ValueError("the numba step advances the state of its integrator's step data only")
+        step advances (:meth:`DynamicIntegrator.step` checks it)."""
         integ = self.integ
         lu = integ.lu
         if integ._tan[0] != 0.0 and lu._active is not lu.skyline:

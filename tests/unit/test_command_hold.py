@@ -322,6 +322,20 @@ def test_a_backlog_at_the_start_of_a_stream_does_not_run_the_legs_away(stewart):
     assert late < 1.5 * smooth, (late, smooth)      # measured 197 N against 159 N
 
 
+def _stream_peak(runner, prog, tn, arrive, t_end: float, after: float = 0.0) -> float:
+    """Peak |leg force| (N) of a started ``runner`` over (``after``, ``t_end``] when the law ``prog``
+    sampled at times ``tn`` arrives as bare lengths at ``arrive`` (s, in order)."""
+    k, peak = 0, 0.0
+    while runner.t < t_end - 1e-9:
+        while k < tn.size and arrive[k] <= runner.t + 1e-12:
+            assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k])) is None
+            k += 1
+        assert runner.step().advanced
+        if runner.t > after:
+            peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
+    return peak
+
+
 def test_a_sender_that_stalls_and_catches_up_keeps_its_clock(stewart):
     """A Python controller that stalls (measured over DDS: 48 ms) sends the commands it owes back to
     back. The late head of that backlog is not a new stream: the clock keeps its phase while the
@@ -337,14 +351,7 @@ def test_a_sender_that_stalls_and_catches_up_keeps_its_clock(stewart):
     owed = np.flatnonzero((tn >= stall_at) & (tn < stall_at + stall))
     arrive[owed] = stall_at + stall + DT * np.arange(owed.size)
     arrive = np.maximum.accumulate(arrive)
-    k, late = 0, 0.0
-    while runner.t < t_end - 1e-9:
-        while k < tn.size and arrive[k] <= runner.t + 1e-12:
-            assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k])) is None
-            k += 1
-        assert runner.step().advanced
-        if runner.t > stall_at + stall + 0.3:
-            late = max(late, float(np.abs(runner.sample(full=False).actuator_forces).max()))
+    late = _stream_peak(runner, prog, tn, arrive, t_end, after=stall_at + stall + 0.3)
     assert late < 1.0e3, late
 
 
@@ -362,14 +369,7 @@ def test_a_late_first_sample_does_not_set_the_clock(stewart, first_late):
     tn = np.arange(int((t_end - t_start) * rate)) / rate
     arrive = t_start + tn
     arrive[0] += first_late
-    arrive = np.maximum.accumulate(arrive)
-    k, peak = 0, 0.0
-    while runner.t < t_end - 1e-9:
-        while k < tn.size and arrive[k] <= runner.t + 1e-12:
-            assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k])) is None
-            k += 1
-        assert runner.step().advanced
-        peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
+    peak = _stream_peak(runner, prog, tn, np.maximum.accumulate(arrive), t_end)
     assert abs(peak - smooth) <= 0.10 * smooth, (first_late, peak, smooth)
 
 

@@ -34,6 +34,15 @@ def _run(sim, steps):
     return np.array(rows)
 
 
+def _started(model, steps):
+    """A simulator warmed up, initialized and ``steps`` steps on."""
+    sim = Simulator(model)
+    sim.warmup()
+    sim.initialize()
+    _run(sim, steps)
+    return sim
+
+
 def test_the_state_is_a_view_of_the_buffer_and_its_copy_is_independent(stewart_bars):
     sim = Simulator(stewart_bars)
     assert isinstance(sim.state, BoundState) and sim.state is sim.data.state
@@ -48,10 +57,7 @@ def test_the_state_is_a_view_of_the_buffer_and_its_copy_is_independent(stewart_b
 
 
 def test_a_rollback_of_the_data_repeats_the_steps_bit_for_bit(stewart_bars):
-    sim = Simulator(stewart_bars)
-    sim.warmup()
-    sim.initialize()
-    _run(sim, 40)
+    sim = _started(stewart_bars, 40)
     saved = sim.data.copy()
     first = _run(sim, 30)
     sim.data.assign(saved)
@@ -67,10 +73,7 @@ def test_a_rollback_of_the_data_repeats_the_steps_bit_for_bit(stewart_bars):
 
 
 def test_assign_drops_a_tangent_factored_after_the_copy(stewart_bars):
-    sim = Simulator(stewart_bars)
-    sim.warmup()
-    sim.initialize()
-    _run(sim, 5)
+    sim = _started(stewart_bars, 5)
     saved = sim.data.copy()
     held_count = sim.data.tan[T_COUNT]
     integ = sim._dynamic
