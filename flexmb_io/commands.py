@@ -328,10 +328,12 @@ class _Period:
     Arrival times (quantized to the twin's steps, delayed by the transport) are mapped onto a
     regular sample clock: with the phase error ``e = a_k − (τ_k−1 + T̂)``, ``τ_k = τ_k−1 + T̂ + β e``
     (a phase-locked loop: the clock moves by a fraction of a µs per sample where the arrivals jitter
-    by milliseconds — what the rate and acceleration estimates of the samples need). Its step T̂ is
-    the least-squares slope of arrival time against sample count over the last ``CLOCK_WINDOW``
-    arrivals on this clock (followed with a gain of ``SMOOTH`` per arrival once half the window is
-    in, so that its wobble does not modulate every rate estimate): a transport that holds samples
+    by milliseconds — what the rate and acceleration estimates of the samples need). While the
+    clock is young (fewer than half of ``CLOCK_WINDOW`` arrivals) its step and its phase are the
+    line under its arrivals (:func:`_arrival_envelope`: a late first sample must not set them);
+    then its step T̂ follows the least-squares slope of arrival time against sample count over the
+    last ``CLOCK_WINDOW`` arrivals on this clock with a gain of ``SMOOTH`` per arrival, so that its
+    wobble does not modulate every rate estimate: a transport that holds samples
     back and hands them over together (a hiccup, then a burst) moves single intervals, and a mean of
     intervals with the pauses left out, but not the slope. Measured over DDS before (T̂ the mean of
     intervals, then moved by γe per sample, γ = β²/4): a 100 Hz stream whose first 18 commands came
