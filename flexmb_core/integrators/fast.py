@@ -100,15 +100,16 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     layout table. Its time, its state ``q, v, a, atil (ndof,)`` and the multipliers ``mult
     (nmult,)`` are advanced in place on success and left unchanged otherwise. Its ``lam (na,)``
     takes the actuator stretches ``lam_new`` (λ_{n+1}) and, for damped models, its ``lam_rate``
-    their rate (1/s): ``rate_new (na,)`` when ``rate_given``, else the
-    backward difference over the stretch history (:func:`begin_stretches`), which moves on when
-    the step is accepted (:func:`accept_stretches`); a failed step leaves λ_n and its rate. Its ``tan`` in/out: the held tangent [held, coefficient, age, refreshes]; ``led``
-    in/out: the guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is
-    accepted) with its rows ``gvec, react``. The guard's energy balance (check 3) applies to steps
-    that move no actuator. The GIL is released: a caller's other threads (the
-    node's executor) run while the step does. Shared with the Python path: ``f_ext`` (loads at
-    t_{n+1}, set by the caller), ``r`` (internal force of the last evaluation) and the skyline
-    factors ``env, inv_diag, lu_stats`` (the held tangent). Everything else comes in the packs
+    their rate (1/s): ``rate_new (na,)`` when ``rate_given``, else the backward difference over
+    the stretch history (:func:`begin_stretches`), which moves on when the step is accepted
+    (:func:`accept_stretches`); a failed step leaves λ_n and its rate. Its ``tan`` in/out: the
+    held tangent [held, coefficient, age, refreshes]; ``led`` in/out: the guard's ledger [il, ir,
+    t, K + U, candidate K + U] (advanced here when the step is accepted) with its rows ``gvec,
+    react``. The guard's energy balance (check 3) applies to steps that move no actuator. The GIL
+    is released: a caller's other threads (the node's executor) run while the step does. Shared
+    with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller), ``r`` (internal force
+    of the last evaluation) and the skyline factors ``env, inv_diag, lu_stats`` (the held
+    tangent). Everything else comes in the packs
     ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes the
     driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
 
