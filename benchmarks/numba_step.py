@@ -1,12 +1,7 @@
-"""The numba step against the Python Newton loop it replaces, on every shipped scene (issue 13).
-
-For each dynamic scene: steps/s of the numba step (``integrators/fast.py``) and of the Python path
-(``DynamicIntegrator._newton``, forced by setting the integrator's ``fast`` to None) on the same
-model, interleaved round by round (medians of the per-round ratios: the machine is shared and its
-speed drifts); for each static scene run by load stepping, the wall time of the whole run with
-``static_step`` and with the Python loop. The two paths give bit-identical states
-(``tests/unit/test_fast_step.py``, ``tests/unit/test_static_step.py``); SuperLU factorizations
-(tangents the skyline LU did not take) are counted.
+"""The numba step on every shipped scene (issue 13): steps/s of each dynamic scene and the wall time
+of each static one run by load stepping, median of ``--rounds`` runs; written to
+docs/benchmarks/numba_step_scenes.{md,json}. (Until 2026-11-29 this also timed the Python Newton
+loop it replaced; that loop is gone, and docs/benchmarks/numba_step.md keeps those measurements.)
 
     .venv/bin/python benchmarks/numba_step.py [--rounds 5] [--steps 400] [--out docs/benchmarks]
 
@@ -43,30 +38,26 @@ STATIC = ["shell_roll_up", "shell_strip_shear", "shell_pulled_cylinder", "shell_
           "shell_pinched_cylinder"]          # shell_slit_annulus: ≈ 1 min a run
 
 
-def _dynamic_rate(model, numba: bool, steps: int) -> tuple[float, int]:
+def _dynamic_rate(model, steps: int) -> float:
     sim = Simulator(model)
     sim.warmup()
     sim.initialize()
-    if not numba:
-        sim._dynamic.fast = None
     for _ in range(10):
         sim.step()
     t0 = time.perf_counter()
     for _ in range(steps):
         sim.step()
-    return steps / (time.perf_counter() - t0), sim._dynamic.lu.fallbacks
+    return steps / (time.perf_counter() - t0)
 
 
-def _static_wall(model, numba: bool) -> tuple[float, int]:
+def _static_wall(model) -> float:
     sim = Simulator(model)
     sim.warmup()
-    if not numba:
-        sim._static.fast = None
     t0 = time.perf_counter()
     sim.initialize()
     while sim.state.t < sim.spec.until - 1e-12:
         sim.step()
-    return time.perf_counter() - t0, sim._static.lu.fallbacks
+    return time.perf_counter() - t0
 
 
 # µs per step of the default path of whatever tree is first on sys.path (run by --against)
@@ -123,67 +114,37 @@ def main() -> int:
     rows = []
     for name in DYNAMIC:
         model = compile_scene(load_scene(ROOT / "scenes" / f"{name}.yaml"))
-        rates = {True: [], False: []}
-        ratios, fallbacks = [], 0
-        for _ in range(args.rounds):
-            a, fallbacks = _dynamic_rate(model, True, args.steps)
-            b, _ = _dynamic_rate(model, False, args.steps)
-            rates[True].append(a)
-            rates[False].append(b)
-            ratios.append(a / b)
-        row = {"scene": name, "kind": "dynamic", "numba_steps_per_s": statistics.median(rates[True]),
-               "python_steps_per_s": statistics.median(rates[False]), "speedup": statistics.median(ratios),
-               "superlu_factorizations": fallbacks, "dofs": model.ndof, "multipliers": model.n_multipliers}
-        rows.append(row)
-        print(f"{name:26s} numba {row['numba_steps_per_s']:8.0f} steps/s  python {row['python_steps_per_s']:8.0f}"
-              f"  × {row['speedup']:.2f}  SuperLU {fallbacks}", flush=True)
+        rate = statistics.median(_dynamic_rate(model, args.steps) for _ in range(args.rounds))
+        rows.append({"scene": name, "kind": "dynamic", "steps_per_s": rate, "dofs": model.ndof,
+                     "multipliers": model.n_multipliers})
+        print(f"{name:26s} {rate:8.0f} steps/s", flush=True)
     for name in STATIC:
         model = compile_scene(load_scene(ROOT / "scenes" / f"{name}.yaml"))
-        walls = {True: [], False: []}
-        ratios = []
-        for _ in range(args.static_rounds):
-            a, fallbacks = _static_wall(model, True)
-            b, _ = _static_wall(model, False)
-            walls[True].append(a)
-            walls[False].append(b)
-            ratios.append(b / a)
-        row = {"scene": name, "kind": "static", "numba_wall_s": statistics.median(walls[True]),
-               "python_wall_s": statistics.median(walls[False]), "speedup": statistics.median(ratios),
-               "superlu_factorizations": fallbacks, "dofs": model.ndof, "multipliers": model.n_multipliers}
-        rows.append(row)
-        print(f"{name:26s} numba {row['numba_wall_s']:7.2f} s  python {row['python_wall_s']:7.2f} s"
-              f"  × {row['speedup']:.2f}  SuperLU {fallbacks}", flush=True)
+        wall = statistics.median(_static_wall(model) for _ in range(args.static_rounds))
+        rows.append({"scene": name, "kind": "static", "wall_s": wall, "dofs": model.ndof,
+                     "multipliers": model.n_multipliers})
+        print(f"{name:26s} {wall:7.2f} s", flush=True)
     out = Path(args.out)
     meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(), "cpus": os.cpu_count(),
             "rounds": args.rounds, "steps": args.steps, "static_rounds": args.static_rounds}
-    (out / "numba_step.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
-    (out / "numba_step.md").write_text(_render(meta, rows))
-    print(f"wrote {out / 'numba_step.md'}")
+    (out / "numba_step_scenes.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+    (out / "numba_step_scenes.md").write_text(_render(meta, rows))
+    print(f"wrote {out / 'numba_step_scenes.md'}")
     return 0
 
 
 def _render(meta: dict, rows: list[dict]) -> str:
-    lines = ["# The numba step against the Python Newton loop (issue 13)", "",
+    lines = ["# The numba step on the shipped scenes (issue 13)", "",
              f"Generated by `benchmarks/numba_step.py` on {meta['date']} ({meta['platform']}, {meta['cpus']} cores, "
-             f"one used). The two paths are interleaved round by round ({meta['rounds']} rounds of "
-             f"{meta['steps']} steps per dynamic scene, {meta['static_rounds']} whole runs per static scene); "
-             "medians, and the median of the per-round ratios. The states are bit-identical "
-             "(`tests/unit/test_fast_step.py`, `tests/unit/test_static_step.py`). 'SuperLU' counts the tangent "
-             "factorizations the skyline LU handed to SuperLU in one numba run (each such attempt is made by the "
-             "Python loop).", "",
-             "## Dynamics: steps/s", "",
-             "| scene | DOFs | multipliers | numba step | Python loop | speed-up | SuperLU |",
-             "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        if r["kind"] == "dynamic":
-            lines.append(f"| {r['scene']} | {r['dofs']} | {r['multipliers']} | {r['numba_steps_per_s']:.0f} | "
-                         f"{r['python_steps_per_s']:.0f} | {r['speedup']:.2f}× | {r['superlu_factorizations']} |")
-    lines += ["", "## Statics by load stepping: wall time of the run", "",
-              "| scene | DOFs | numba Newton | Python loop | speed-up | SuperLU |", "|---|---|---|---|---|---|"]
-    for r in rows:
-        if r["kind"] == "static":
-            lines.append(f"| {r['scene']} | {r['dofs']} | {r['numba_wall_s']:.2f} s | {r['python_wall_s']:.2f} s | "
-                         f"{r['speedup']:.2f}× | {r['superlu_factorizations']} |")
+             f"one used): medians of {meta['rounds']} runs of {meta['steps']} steps per dynamic scene and of "
+             f"{meta['static_rounds']} whole runs per static scene. Every step is one numba call "
+             "(`integrators/fast.py`, `integrators/static_step.py`).", "",
+             "## Dynamics", "", "| scene | DOFs | multipliers | steps/s |", "|---|---|---|---|"]
+    lines += [f"| {r['scene']} | {r['dofs']} | {r['multipliers']} | {r['steps_per_s']:.0f} |"
+              for r in rows if r["kind"] == "dynamic"]
+    lines += ["", "## Statics by load stepping: wall time of the run", "", "| scene | DOFs | wall time |",
+              "|---|---|---|"]
+    lines += [f"| {r['scene']} | {r['dofs']} | {r['wall_s']:.2f} s |" for r in rows if r["kind"] == "static"]
     return "\n".join(lines) + "\n"
 
 

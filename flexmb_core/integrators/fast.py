@@ -1,21 +1,22 @@
-"""One numba call per time step: the Newton attempt of a dynamic step, for every element kind.
+"""One numba call per time step: the Newton of a dynamic step, for every element kind.
 
-:class:`NumbaStep` runs the first Newton attempt of a step of
+:class:`NumbaStep` runs each Newton attempt of a step of
 :class:`~flexmb_core.integrators.dynamic.DynamicIntegrator` entirely inside :func:`model_step`:
 predictor and driven supports, the residual and (held or refreshed) tangent of every frame group,
 the bars, every shell group, the multiplier constraints (rigid corners, off-plane hinges, director
-ties) and the moment loads, the inertial residual, the skyline LU factor and solve, the
-modified-Newton refresh rule, the rates, the energies and the step guard's checks. It calls the
-very kernels the Python path calls, in the same order, so the states it produces are bit-identical
-to it (``tests/unit/test_fast_step.py``); it only removes the Python between them.
+ties) and the moment loads, the inertial residual, the skyline LU factor and solve (static pivoting,
+augmentation and refinement where the factors are suspect: :func:`~.packs.factor_packed`,
+:func:`~.packs.solve_packed`), the modified-Newton refresh rule, the rates, the energies and the
+step guard's checks. It is the only Newton of dynamics: until 2026-11-29 a Python loop made the
+attempts whose tangent the skyline LU handed to SuperLU, and the two were bit-identical; the
+step references of that time (``tests/step_cases.py``) hold it to those results.
 
 Every integrator: generalized-α, Newmark and the Chung–Hulbert form (kept to show it is not
-objective; with multipliers the Python path refuses it, :meth:`NumbaStep.unsupported` names that).
-A step the kernel cannot finish —
-no convergence, a refused root — leaves the state as it was (under ``accept_flagged``: at the last
-iterate, as the Python path leaves it) and hands back to the integrator, whose ``on_unconverged``
-policy proceeds as for any failed attempt; its sub-steps are numba steps too. A pivot the skyline
-LU must not take hands the attempt to the Python path, which pivots with SuperLU.
+objective; with multipliers it is refused, :meth:`NumbaStep.unsupported` names that). A step the
+kernel cannot finish — no convergence, a refused root, a tangent that cannot be factored — leaves
+the state as it was (under ``accept_flagged``: at the last iterate) and hands back to the
+integrator, whose ``on_unconverged`` policy proceeds as for any failed attempt; its sub-steps are
+numba steps too.
 
 The arrays travel in the packs of :mod:`.packs` (:class:`~.packs.ModelPacks`).
 """
@@ -33,25 +34,23 @@ from ..model.step_data import (C_T, C_T_HIST, C_T_PREV, D_A, D_ATIL, D_CLOCK, D_
                                D_LAMRATE, D_LED, D_MULT, D_Q, D_REACT, D_TAN, D_V)
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
-from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import _energies
 from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
-from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BI, L_BJ, L_BLK, L_BV, L_CP, L_DQ,
-                    L_DRIVE, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA,
-                    L_LAMN, L_LRH, L_LRL, L_LRP, L_LUWORK, L_MASSK, L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR,
-                    L_PERM, L_Q0, L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP, L_VEVAL, L_WBUF,
-                    L_ZLAM, L_ZSLOT, NF, N_PAR, P_ACCUM, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS,
-                    P_CONTRACTION, P_DAMPED, P_F0, P_GAMMA, P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV,
-                    P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed,
-                    moment_work_packed, unknown_fields, view1, view2)
+from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BI, L_BJ, L_BV, L_CP, L_DQ, L_DRIVE, L_DRVIDX,
+                    L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA, L_LAMN, L_MASSK,
+                    L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_Q0, L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_VEVAL,
+                    L_WBUF, L_ZLAM, NF, N_PAR, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED,
+                    P_F0, P_GAMMA, P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL,
+                    P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, factor_packed, moment_work_packed,
+                    singular_note, solve_packed, unknown_fields, view1, view2)
 
 # Return codes of model_step.
-OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, PIVOT, INVERTED, SVK_LIMIT, ENERGY = range(8)
+OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, SINGULAR, INVERTED, SVK_LIMIT, ENERGY = range(8)
 
 # Output slots of io.
 (IO_IT, IO_REL, IO_INC, IO_STRAIN, IO_KIN, IO_GRAV, IO_X, IO_Y, IO_EEND, IO_AUX, IO_UP, IO_DISS, IO_GROUP,
- N_IO) = range(14)
+ IO_OMEGA, N_IO) = range(15)
 
 
 @njit(cache=True, nogil=True)
@@ -61,7 +60,7 @@ def begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt):
     ``rate_new (na,)`` when ``rate_given``, else the second-order backward difference over the
     stretch history (first order when the history is not that of the data's time, e.g. the first
     step after a start); λ_n is kept as the history's candidate. Returns whether any actuator
-    moves in the step ``dt`` (s). The numba step and the Python path both call it."""
+    moves in the step ``dt`` (s)."""
     clock = view1(d, dlay[D_CLOCK])
     rate = view1(d, dlay[D_LAMRATE])
     t_n = clock[C_T]
@@ -107,16 +106,18 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     t, K + U, candidate K + U] (advanced here when the step is accepted) with its rows ``gvec,
     react``. The guard's energy balance (check 3) applies to steps that move no actuator. The GIL
     is released: a caller's other threads (the node's executor) run while the step does. Shared
-    with the Python path: ``f_ext`` (loads at t_{n+1}, set by the caller), ``r`` (internal force
-    of the last evaluation) and the skyline factors ``env, inv_diag, lu_stats`` (the held
-    tangent). Everything else comes in the packs
+    with the workspace and the integrator's LU: ``f_ext`` (loads at t_{n+1}, set by the caller),
+    ``r`` (internal force of the last evaluation) and the skyline factors ``env, inv_diag,
+    lu_stats`` (the held tangent). Everything else comes in the packs
     ``cf, ci, wf, wi`` and their layout table ``lay`` (see the module); the caller writes the
     driven supports' values at t_{n+1} and the moment scales into their ``wf`` items.
 
     ``dt``: the step; ``guarded``: run the step guard. ``io`` out (``IO_*``):
     iterations, relative residual, increment, strain, kinetic and gravity energy, the guard's
     values (x, y, e_end, aux: element of an inverted section or the energy check's code, and the
-    frame group of that section) and the strain energy at the Newton start.
+    frame group of that section), the strain energy at the Newton start, and the largest backward
+    error of the step's linear solves (0 unless a tangent's factors were suspect,
+    :func:`~.packs.solve_packed`).
 
     Returns one of the codes ``OK, NO_CONVERGENCE, …, ENERGY``.
     """
@@ -163,9 +164,6 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     modified = par[P_MODIFIED] != 0.0
     contraction = par[P_CONTRACTION]
     max_age = int(par[P_MAXAGE])
-    accumulate = par[P_ACCUM] != 0.0
-    pivot_tol = par[P_PIVTOL]
-    min_pivot_ratio = par[P_MINPIV]
     damped = par[P_DAMPED] != 0.0
     # undamped: the elements read no stretch rate (a zero item, whatever the state's rates hold)
     state_rate = view1(d, dlay[D_LAMRATE])
@@ -173,7 +171,7 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     nmult = int(par[P_NMULT])
     nfg = int(par[P_NFG])
     f0 = int(par[P_F0])
-    # Chung–Hulbert (DynamicIntegrator._newton): Newmark kinematics with a itself (ã ≡ a), inertia
+    # Chung–Hulbert: Newmark kinematics with a itself (ã ≡ a), inertia
     # (1−αm) a_{n+1} + αm a_n (the inertial residual with αf = 0), forces at q_{n+1−αf} (and the
     # rates blended alike), tangent (1−αf) K + (1−αm)/(βΔt²) M
     ch = par[P_CH] != 0.0
@@ -185,10 +183,10 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
         lam_n[i] = lam[i]
         rate_n[i] = state_rate[i]
     moved = begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt)
-    # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert (DynamicIntegrator._newton)
+    # the energy balance needs forces at t_{n+1}: not for Chung–Hulbert
     balance = not moved and not ch
 
-    # -- predictor (Python path: DynamicIntegrator._newton) -------------------------------------
+    # -- predictor ---------------------------------------------------------------------------------
     n = q.size
     nf = free.size
     q_n = ivec[0]
@@ -233,6 +231,7 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     held = tan[0] != 0.0
     refresh = (not modified) or (not held) or tan[1] != coef or tan[2] >= max_age
     prev_inc = math.inf
+    io[IO_OMEGA] = 0.0
     inc = math.inf
     rel = math.inf
     strain = 0.0
@@ -247,7 +246,7 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     # bools from data, not the literal False: a literal argument compiles a second signature of
     # the kernels it is passed to (tests/unit/test_signatures.py)
     no_dlam = dt < 0.0
-    v_k = v_eval        # undamped: stays zero (ws.zero_v of the Python path), the kernels do not read it
+    v_k = v_eval        # undamped: stays zero, the kernels do not read it
     q_force = q_eval if ch else q     # where the forces are evaluated
     # -- Newton ------------------------------------------------------------------------------------
     for it in range(1, max_it + 1):
@@ -281,21 +280,19 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
             if ch:
                 for i in range(kdata.size):
                     kdata[i] *= k_scale
-            step = _factor_kernel(kdata, view1(wf, lay[L_MASSK]), coef, view1(wi, lay[L_SLOT]), accumulate,
-                                  view1(wi, lay[L_ZSLOT]), view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]),
-                                  view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH]), view1(wi, lay[L_URP]), view1(wi, lay[L_URL]),
-                                  view1(wi, lay[L_URH]), view1(wi, lay[L_BLK]), env, inv_diag, pivot_tol, lu_stats, nmult)
-            if step >= 0 or not lu_stats[0] > 0.0 or lu_stats[1] < min_pivot_ratio * lu_stats[0]:
-                tan[0] = 0.0
-                code = PIVOT
+            if not factor_packed(kdata, view1(wf, lay[L_MASSK]), coef, env, inv_diag, lu_stats, nmult, wf, wi, lay,
+                                 par):
+                code = SINGULAR
                 break
             tan[0] = 1.0
             tan[1] = coef
             tan[2] = 0.0
             tan[3] += 1.0
-        _solve_kernel(rf, view1(wi, lay[L_PERM]), view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]), view1(wi, lay[L_LRL]),
-                      view1(wi, lay[L_LRH]), view1(wi, lay[L_URP]), view1(wi, lay[L_URL]), view1(wi, lay[L_URH]), env,
-                      inv_diag, view1(wf, lay[L_LUWORK]), dq)
+        # a solve that refinement could not make accurate (a singular tangent) still gives a
+        # regularized direction: whether it leads to a root is the convergence test's to say
+        omega = solve_packed(rf, dq, env, inv_diag, lu_stats, wf, wi, lay, par)
+        if omega > io[IO_OMEGA]:
+            io[IO_OMEGA] = omega
         inc = apply_increment(q, free, dq, -1.0, inv_scale)
         for i in range(nmult):
             mult[i] -= dq[nf + i]
@@ -375,17 +372,16 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     io[IO_GRAV] = grav
     io[IO_DISS] = diss
     if code != OK:
-        if code != PIVOT:
-            tan[0] = 0.0           # a failed step never leaves a stale tangent behind
-        if code == PIVOT or par[P_KEEP] == 0.0:
-            for i in range(n):     # the step's start, for the integrator's policy (or the Python path)
+        tan[0] = 0.0               # a failed step never leaves a stale tangent behind
+        if par[P_KEEP] == 0.0:
+            for i in range(n):     # the step's start, for the integrator's policy
                 q[i] = q_n[i]
                 v[i] = v_n[i]
                 a[i] = a_n[i]
                 atil[i] = at_n[i]
             for i in range(nmult):
                 mult[i] = mult_n[i]
-        if code != PIVOT and par[P_KEEP] != 0.0:
+        if par[P_KEEP] != 0.0:
             clock[C_T] = t_n + dt  # the failed iterate at t_{n+1}, λ_{n+1} in force (accept_flagged)
         else:
             for i in range(lam.size):
@@ -424,7 +420,7 @@ class NumbaStep:
         if spec.analysis != "dynamic":
             return f"analysis {spec.analysis}"
         if spec.integrator == "chung_hulbert" and model.n_multipliers:
-            return "integrator chung_hulbert with multipliers (the Python path refuses it)"
+            return "the chung_hulbert integrator does not support rigid corners (multipliers)"
         unknown = unknown_fields(model)
         if unknown:
             return f"model features this step does not know: {', '.join(unknown)}"
@@ -447,7 +443,7 @@ class NumbaStep:
         par[P_CMASS], par[P_PIVTOL], par[P_MINPIV] = guard._c_mass, sky.pivot_tol, integ.lu.min_pivot_ratio
         par[P_DAMPED] = bool(m.material_damping)
         par[P_CH] = spec.integrator == "chung_hulbert"
-        # accept_flagged keeps a failed attempt's last iterate, as the Python path leaves it
+        # accept_flagged keeps a failed attempt's last iterate
         par[P_KEEP] = spec.on_unconverged == "accept_flagged"
         self.packs = ModelPacks(m, ws, sky, guard, integ._inv_scale, integ._mass, integ._mass_blocks, par)
         self._lay = self.packs.lay
@@ -470,7 +466,7 @@ class NumbaStep:
         self._still = False
 
     def invalidate(self) -> None:
-        """Someone else (the Python path, ``initialize``) formed ``f_ext``: recompute it next time."""
+        """Someone else (``initialize``, a sub-step) formed ``f_ext``: recompute it next time."""
         self._scales[:] = math.nan
         self._g_scale = math.nan
         self._still = False
@@ -508,18 +504,14 @@ class NumbaStep:
                 ws.f_ext += gs * m.gravity_vector
         self._still = t >= self._still_after
 
-    def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None
-                ) -> StepResult | None:
-        """The first Newton attempt of the step ``state.t → state.t + dt`` to the actuator
-        stretches ``lam_new`` (rates ``lam_rate`` or, for damped models, the integrator's backward
-        difference): the result (state advanced when converged, unchanged otherwise), or ``None``
-        when the integrator's Python path must make the attempt (a held SuperLU factorization, a
-        pivot for SuperLU). ``state``: the state of the integrator's step data, the only one a
-        step advances (:meth:`DynamicIntegrator.step` checks it)."""
+    def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None) -> StepResult:
+        """The Newton attempt of the step ``state.t → state.t + dt`` to the actuator stretches
+        ``lam_new`` (rates ``lam_rate`` or, for damped models, the integrator's backward
+        difference): the result, with the state advanced when converged and otherwise at the
+        step's start (under ``accept_flagged``: at the last iterate). ``state``: the state of the
+        integrator's step data, the only one a step advances (:meth:`DynamicIntegrator.step`
+        checks it)."""
         integ = self.integ
-        lu = integ.lu
-        if integ._tan[0] != 0.0 and lu._active is not lu.skyline:
-            return None                 # a held SuperLU factorization: the Python path reuses it
         rate_given = lam_rate is not None
         t_n = state.t
         t_new = t_n + dt
@@ -529,9 +521,6 @@ class NumbaStep:
         cf, ci, wf, wi = self._packs
         code = model_step(d, dlay, lam_new, lam_rate if rate_given else self._no_rate, rate_given, f_ext, r, env,
                           inv_diag, stats, cf, ci, wf, wi, self._lay, self._io, dt, integ.guard.enabled)
-        if integ._tan[0] != 0.0:
-            lu._active = lu.skyline
-            lu.skyline._factored = True
         it, rel, inc, strain, kin, grav = self._io[:IO_X].tolist()
         integ.ws.dissipation = self._io[IO_DISS]
         if code == OK:
@@ -539,21 +528,20 @@ class NumbaStep:
         return self._failure(code, int(it), rel, inc, strain, kin, grav)
 
     def _failure(self, code: int, it: int, rel: float, inc: float, strain: float, kin: float,
-                 grav: float) -> StepResult | None:
-        """The failed attempt as the Python path reports it (same messages and flags)."""
+                 grav: float) -> StepResult:
+        """The failed attempt: its message, and its flag when the step guard refused the root."""
         integ, m, spec, io = self.integ, self.model, self.integ.spec, self._io
         guard = integ.guard
-        if code == PIVOT:
-            integ._factored_coef = None
-            return None
         flag, message = "", ""
-        if code == NO_CONVERGENCE:
+        if code == SINGULAR:
+            message = f"singular tangent at Newton iteration {it} (a non-finite pivot, or a zero matrix)"
+        elif code == NO_CONVERGENCE:
             message = (f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e}, "
-                       f"tolerance {spec.tolerance:.1e})")
+                       f"tolerance {spec.tolerance:.1e}){singular_note(io[IO_OMEGA])}")
         elif code == NON_FINITE_RESIDUAL:
-            message = f"non-finite residual at Newton iteration {it}"
+            message = f"non-finite residual at Newton iteration {it}{singular_note(io[IO_OMEGA])}"
         elif code == NON_FINITE_INCREMENT:
-            message = f"non-finite increment at Newton iteration {it}"
+            message = f"non-finite increment at Newton iteration {it}{singular_note(io[IO_OMEGA])}"
         elif code == INVERTED:
             flag = "inverted"
             group = m.frame_groups[int(io[IO_GROUP])]

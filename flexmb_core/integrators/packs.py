@@ -9,8 +9,10 @@ rows ``L_*``; frame group ``k`` has rows ``F0 + k·NF + F_*`` and shell group ``
 ``S0 + k·NS + S_*`` (``F0, S0`` and the group counts in the step constants ``P_*``).
 
 :func:`assemble_packed` is :func:`flexmb_core.model.assembly.assemble` over the packs (the same
-kernels in the same order: bit-identical); :class:`ModelPacks` builds the packs of a model once.
-The dynamic step (:mod:`.fast`) and the static Newton (:mod:`.static_step`) run on them.
+kernels in the same order: bit-identical); :func:`factor_packed` and :func:`solve_packed` are the
+tangent's factorization and solve both Newtons share; :class:`ModelPacks` builds the packs of a
+model once. The dynamic step (:mod:`.fast`) and the static Newton (:mod:`.static_step`) run on
+them.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from ..kernels.shell import shell_group, shell_scratch
 from ..kernels.truss import truss_group
 from ..model.assembly import apply_drives
 from ..model.model import Model, TrussGroup
+from ..solvers.banded import (BACKWARD_ERROR_TOL, STATIC_PIVOT, _factor_kernel, _refine_kernel, _solve_kernel,
+                              refine_scratch)
 
 # Items of the whole model (rows of the layout table).
 (L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
@@ -39,7 +43,10 @@ from ..model.model import Model, TrussGroup
  L_SDV, L_SDFA, L_SF, L_SBMAT, L_SCB, L_SQE, L_SRE, L_SKE, L_CKE, L_HKE, L_TIEKE, L_RC, L_CP, L_MULTN,
  L_FSCALE, L_MSCALE, L_RM, L_QL, L_KDUMMY, L_DRVVAL, L_ZLAM, L_QEVAL, L_LAMN, L_RATEN,                 # wf
  L_SLOT, L_ZSLOT, L_BASE, L_LRP, L_LRL, L_LRH, L_URP, L_URL, L_URH, L_BLK, L_PERM, L_DRIVE,   # wi
- N_ITEMS) = range(86)
+ L_KPTR, L_KIDX,                                 # wi (writable like the skyline's, for one signature)
+ L_KREF, L_RES, L_CORR, L_KRYLOV, L_HESS, L_ROT, L_RHS, L_AUGRHO,                               # wf
+ L_AUGA, L_AUGB, L_AUGD, L_GPOS, L_GROW,                                                      # wi
+ N_ITEMS) = range(101)
 # Items of one frame group (rows F0 + k·NF + item).
 (F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
  F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
@@ -66,6 +73,134 @@ def view1(p, row):
 @register_jitable
 def view2(p, row):
     return p[row[0]:row[0] + row[5]].reshape((row[1], row[2]))
+
+
+# The tangent's factorization and solve, shared by the numba steps of dynamics and statics.
+@register_jitable
+def suspect_factors(stats, min_pivot_ratio):
+    """The last factorization replaced a pivot (static pivoting) or its smallest pivot is below
+    ``min_pivot_ratio`` · max |diag|: its solves are refined and checked (:func:`solve_packed`)."""
+    return stats[2] > 0.0 or stats[1] < min_pivot_ratio * stats[0]
+
+
+@register_jitable
+def factor_packed(kdata, mass, coef, env, inv_diag, stats, nmult, wf, wi, lay, par):
+    """Factor ``A = kdata + coef · mass`` with the skyline LU and static pivoting
+    (:func:`~flexmb_core.solvers.banded._factor_kernel`) into ``env, inv_diag, stats``. False when
+    it cannot (a non-finite pivot, a zero matrix).
+
+    With multipliers, factors that had to replace pivots are made again of the augmented system
+    ``[K + ρ GᵀG, Gᵀ; G, 0]`` (:func:`augment`): its zero pivots were those of the members'
+    vectors that only the constraints tie, which ``ρ GᵀG`` stiffens; the augmented system has the
+    same solution (:func:`solve_packed` adds ``ρ Gᵀ c`` to the right-hand side). Suspect and
+    augmented factors keep a copy of the matrix they factored (``L_KREF``) to refine their solves
+    against."""
+    aug = view1(wf, lay[L_AUGRHO])
+    aug[0] = 0.0
+    if not _factor(kdata, mass, coef, env, inv_diag, stats, nmult, wi, lay, par):
+        return False
+    if nmult > 0 and stats[2] > 0.0:
+        aug[0] = augment(kdata, stats[0], wi, lay)
+        if not _factor(kdata, mass, coef, env, inv_diag, stats, nmult, wi, lay, par):
+            return False
+    if aug[0] != 0.0 or suspect_factors(stats, par[P_MINPIV]):
+        kref = view1(wf, lay[L_KREF])
+        for p in range(kref.size):
+            kref[p] = kdata[p] + coef * mass[p]
+    return True
+
+
+@register_jitable
+def _factor(kdata, mass, coef, env, inv_diag, stats, nmult, wi, lay, par):
+    step = _factor_kernel(kdata, mass, coef, view1(wi, lay[L_SLOT]), par[P_ACCUM] != 0.0, view1(wi, lay[L_ZSLOT]),
+                          view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]), view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH]),
+                          view1(wi, lay[L_URP]), view1(wi, lay[L_URL]), view1(wi, lay[L_URH]), view1(wi, lay[L_BLK]),
+                          env, inv_diag, par[P_PIVTOL], STATIC_PIVOT, stats, nmult)
+    return step < 0 and stats[0] > 0.0
+
+
+@register_jitable
+def augment(kdata, dmax, wi, lay):
+    """``K += ρ GᵀG`` in place on the tangent ``kdata``, with ``ρ = max |diag A| / max diag GᵀG``
+    (the constraint rows ``G`` are the multiplier rows of ``kdata``; every pair of DOFs of one
+    constraint is in the pattern already, :func:`augmentation_maps`). Returns ``ρ``."""
+    src_a, src_b, dst = view1(wi, lay[L_AUGA]), view1(wi, lay[L_AUGB]), view1(wi, lay[L_AUGD])
+    gg = 0.0
+    for t in range(dst.size):
+        if src_a[t] == src_b[t]:
+            gg = max(gg, kdata[src_a[t]] * kdata[src_a[t]])
+    if not gg > 0.0:
+        return 0.0
+    rho = dmax / gg
+    for t in range(dst.size):
+        kdata[dst[t]] += rho * (kdata[src_a[t]] * kdata[src_b[t]])
+    return rho
+
+
+@register_jitable
+def solve_packed(rf, dq, env, inv_diag, stats, wf, wi, lay, par):
+    """``dq = A⁻¹ rf`` with the factors of :func:`factor_packed` (of the augmented system: with
+    ``ρ Gᵀ c`` added to a copy of ``rf``); with suspect factors, refined against the matrix
+    factored (:func:`~flexmb_core.solvers.banded._refine_kernel`), as every solve of an augmented
+    system is. Returns the normwise backward error of ``dq`` (0 when not measured), to compare with
+    :data:`~flexmb_core.solvers.banded.BACKWARD_ERROR_TOL`."""
+    perm, base = view1(wi, lay[L_PERM]), view1(wi, lay[L_BASE])
+    lrp, lrl, lrh = view1(wi, lay[L_LRP]), view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH])
+    urp, url, urh = view1(wi, lay[L_URP]), view1(wi, lay[L_URL]), view1(wi, lay[L_URH])
+    work = view1(wf, lay[L_LUWORK])
+    rho = view1(wf, lay[L_AUGRHO])[0]
+    b = rf
+    if rho != 0.0:
+        b = view1(wf, lay[L_RHS])
+        for i in range(rf.size):
+            b[i] = rf[i]
+        g_pos, g_row = view1(wi, lay[L_GPOS]), view1(wi, lay[L_GROW])
+        kref = view1(wf, lay[L_KREF])
+        kidx = view1(wi, lay[L_KIDX])
+        for t in range(g_pos.size):     # ρ Gᵀ c, G from the factored copy (its rows are K's)
+            p = g_pos[t]
+            b[kidx[p]] += rho * kref[p] * rf[g_row[t]]
+    _solve_kernel(b, perm, base, lrp, lrl, lrh, urp, url, urh, env, inv_diag, work, dq)
+    if not suspect_factors(stats, par[P_MINPIV]) and rho == 0.0:
+        return 0.0
+    kref = view1(wf, lay[L_KREF])
+    return _refine_kernel(kref, kref, 0.0, view1(wi, lay[L_KPTR]), view1(wi, lay[L_KIDX]), b, dq, perm, base, lrp,
+                          lrl, lrh, urp, url, urh, env, inv_diag, work, view1(wf, lay[L_RES]), view1(wf, lay[L_CORR]),
+                          view2(wf, lay[L_KRYLOV]), view2(wf, lay[L_HESS]), view2(wf, lay[L_ROT]))
+
+
+def augmentation_maps(model: Model) -> tuple[np.ndarray, ...]:
+    """Where :func:`augment` and :func:`solve_packed` find ``G`` and put ``ρ GᵀG``: for every pair
+    of entries ``(i, j), (i, k)`` of a multiplier row ``i`` of the system pattern whose columns are
+    free DOFs, their CSR positions ``(a, b)`` and that of ``(j, k)`` (``d``); and every such entry's
+    position with its system row (``pos, row``). All int64; empty without multipliers."""
+    nf, ns = model.nfree, model.nsys
+    indptr, indices = np.asarray(model.indptr), np.asarray(model.indices)
+    a, b, d, pos, row = [], [], [], [], []
+    for r in range(nf, ns):
+        ps = [p for p in range(indptr[r], indptr[r + 1]) if indices[p] < nf]
+        for p1 in ps:
+            pos.append(p1)
+            row.append(r)
+            j = indices[p1]
+            cols = indices[indptr[j]:indptr[j + 1]]
+            for p2 in ps:
+                k = np.searchsorted(cols, indices[p2])
+                if k == cols.size or cols[k] != indices[p2]:
+                    raise ValueError(f"augmentation_maps: ({j}, {indices[p2]}) is not in the pattern")
+                a.append(p1)
+                b.append(p2)
+                d.append(indptr[j] + k)
+    return tuple(np.asarray(x, dtype=np.int64) for x in (a, b, d, pos, row))
+
+
+def singular_note(omega: float) -> str:
+    """What a failed Newton's message adds when one of its solves kept a backward error ``omega``
+    above :data:`~flexmb_core.solvers.banded.BACKWARD_ERROR_TOL` after refinement (else nothing)."""
+    if not omega > BACKWARD_ERROR_TOL:
+        return ""
+    return (f"; the tangent was singular to working precision (a solve's backward error {omega:.1e} after "
+            "refinement): a mechanism with a free motion needs a support")
 
 
 @register_jitable
@@ -199,8 +334,8 @@ class _Packer:
         return buf
 
 
-# Model fields model_step accounts for. A field added to Model later keeps a model on the Python
-# path whenever it is not empty, until it is looked at here.
+# Model fields model_step accounts for. A field added to Model later makes a model that uses it
+# refused (NumbaStep.unsupported, NumbaStatic.unsupported) until it is looked at here.
 _KNOWN_MODEL_FIELDS = frozenset((
     "scene", "ndof", "q0", "dof_scale", "free", "free_index", "indptr", "indices", "mass_kdata", "mass_csr",
     "frame_groups", "truss", "moments", "load_vectors", "load_signals", "gravity_vector", "gravity_signal",
@@ -215,7 +350,7 @@ def _empty(value) -> bool:
 
 def unknown_fields(model: Model) -> list[str]:
     """Model fields that are not empty and that the packs do not know (a field added to Model
-    later keeps a model on the Python path until it is looked at here)."""
+    later makes the model refused, with its name, until it is looked at here)."""
     return [f.name for f in dataclasses.fields(model)
             if f.name not in _KNOWN_MODEL_FIELDS and not _empty(getattr(model, f.name))]
 
@@ -282,14 +417,17 @@ class ModelPacks:
                           (L_RM, np.zeros(n)), (L_QL, np.zeros(n)), (L_KDUMMY, np.zeros(0)),
                           (L_DRVVAL, np.zeros(drive_ids.size)), (L_ZLAM, np.zeros(m.actuators.l0.size)),
                           (L_QEVAL, np.zeros(n)), (L_LAMN, np.zeros(m.actuators.l0.size)),
-                          (L_RATEN, np.zeros(m.actuators.l0.size))):
+                          (L_RATEN, np.zeros(m.actuators.l0.size)), (L_KREF, np.zeros(m.nnz)),
+                          *zip((L_RES, L_CORR, L_KRYLOV, L_HESS, L_ROT), refine_scratch(m.nsys)),
+                          (L_RHS, np.zeros(m.nsys)), (L_AUGRHO, np.zeros(1))):
             wf.add(item, arr)
         for item, arr in zip(range(L_SDV, L_SKE + 1), shell_scratch()):
             wf.add(item, arr)
         for item, arr in ((L_SLOT, sky._slot), (L_ZSLOT, sky._zero_slots), (L_BASE, sky._base),
                           (L_LRP, sky._lrun[0]), (L_LRL, sky._lrun[1]), (L_LRH, sky._lrun[2]), (L_URP, sky._urun[0]),
                           (L_URL, sky._urun[1]), (L_URH, sky._urun[2]), (L_BLK, sky._blk_ptr), (L_PERM, sky.perm),
-                          (L_DRIVE, drive_ids)):
+                          (L_DRIVE, drive_ids), (L_KPTR, m.indptr), (L_KIDX, m.indices),
+                          *zip((L_AUGA, L_AUGB, L_AUGD, L_GPOS, L_GROW), augmentation_maps(m))):
             wi.add(item, arr)
         for k, (g, st, gst) in enumerate(zip(m.frame_groups, ws.frame_structure, guard._stations)):
             b = N_ITEMS + k * NF
@@ -327,7 +465,7 @@ class ModelPacks:
 
     def drives(self, q: np.ndarray, t: float) -> None:
         """The driven supports' DOFs at ``t`` into their ``wf`` item (by :func:`apply_drives`
-        itself on a copy of ``q``: the same operations as the Python path's)."""
+        itself on a copy of ``q``: the same operations as a Python caller's)."""
         if self._q_drive is None:
             return
         self._q_drive[:] = q

@@ -23,11 +23,10 @@ Path following through limit points and snap-backs: :mod:`flexmb_core.integrator
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from ..model.assembly import apply_drives, assemble, update_load_scales
+from ..errors import SceneError
+from ..model.assembly import assemble
 from ..model.model import Model
 from ..model.workspace import State, Workspace
 from ..scene.schema import SolverSpec
@@ -36,7 +35,6 @@ from ..solvers.linear import FixedPatternSolver
 from ..solvers.result import StepResult
 from ..solvers.substep import retry_in_pieces
 from .critical import TangentLU
-from .energy import gravity_potential
 from .path_following import dof_index, position_mask
 from .static_step import NumbaStatic
 
@@ -106,16 +104,15 @@ class StaticSolver:
         self._inv_scale = 1.0 / model.dof_scale[model.free]
         self._backup: State | None = None
         self.guard = StepGuard(model, tolerance=spec.tolerance)
-        self._q_p = np.zeros(model.ndof)            # Newton start of the increment under way
-        self._c_p = np.zeros(model.n_multipliers)
         self._w = position_mask(model)[:model.nfree]
         self._predicted = -1.0                     # ‖first Newton increment‖ of the step (m); −1: not yet
         # snap-through watch: on for static runs (one more tangent and factorization per step)
         watch = spec.analysis == "static" if monitor is None else monitor
         self.snap = SnapThroughMonitor(model, spec) if watch else None
-        # One numba call per load increment (bit-identical states; None: the Python loop, which
-        # also makes the increments whose tangent needs SuperLU's pivoting)
-        self.fast = None if NumbaStatic.unsupported(model) else NumbaStatic(self)
+        lacking = NumbaStatic.unsupported(model)
+        if lacking:
+            raise SceneError(f"{model.scene.source}:solver", f"the static Newton cannot run this model: {lacking}")
+        self.fast = NumbaStatic(self)            # one numba call per load increment (static_step.py)
 
     def solve_at(self, state: State, t: float, lam: np.ndarray) -> StepResult:
         """Equilibrium at pseudo-time ``t`` starting from ``state.q``. On failure, the policy
@@ -138,87 +135,4 @@ class StaticSolver:
         return res
 
     def _newton(self, state: State, t: float, lam: np.ndarray) -> StepResult:
-        if self.fast is not None:
-            res = self.fast.solve(state, t, lam)
-            if res is not None:
-                return res
-        # A diverging iterate overflows (norms of huge residuals, inf − inf): every value that
-        # matters is checked for finiteness and a failure is reported in the StepResult, so numpy
-        # need not print warnings on the way.
-        with np.errstate(all="ignore"):
-            return self._newton_steps(state, t, lam)
-
-    def _newton_steps(self, state: State, t: float, lam: np.ndarray) -> StepResult:
-        m, ws, spec = self.model, self.ws, self.spec
-        free = m.free
-        state.lam[:] = lam
-        state.t = t
-        update_load_scales(m, ws, t)
-        q = state.q
-        apply_drives(m, q, t)
-        self._q_p[:] = q
-        u_p = 0.0
-        inc, rel, message, converged, it = math.inf, math.inf, "", False, 0
-        nf = m.nfree
-        rf = np.zeros(m.nsys)
-        for it in range(1, spec.max_iterations + 1):
-            strain = assemble(m, ws, q, lam, True, state.mult)
-            if it == 1:
-                u_p = strain
-                if m.n_multipliers:
-                    self._c_p[:] = ws.rc
-            rf[:nf] = (ws.r - ws.f_ext)[free]
-            rf[nf:] = ws.rc
-            if not np.all(np.isfinite(rf)):
-                message = f"non-finite residual at iteration {it}"
-                break
-            try:
-                self.lu.factor(ws.kdata)
-            except RuntimeError as exc:
-                message = (f"singular tangent at iteration {it} ({exc}); "
-                           "a mechanism with a free motion needs a support")
-                break
-            dq = self.lu.solve(-rf)
-            if not np.all(np.isfinite(dq)):
-                message = f"non-finite increment at iteration {it}"
-                break
-            if it == 1 and self._predicted < 0.0:    # the tangent's prediction of the whole step
-                self._predicted = float(np.linalg.norm(dq[:nf][self._w]))
-            q[free] += dq[:nf]
-            state.mult += dq[nf:]
-            inc = float(np.max(np.abs(dq[:nf]) * self._inv_scale))
-            ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-            rel = float(np.linalg.norm(rf[:nf]) / ref)
-            viol = float(np.abs(rf[nf:]).max()) if m.n_multipliers else 0.0
-            if inc <= spec.tolerance and viol <= spec.tolerance:
-                converged = True
-                break
-        if not converged:
-            if not message:
-                message = f"no convergence in {spec.max_iterations} iterations (increment {inc:.2e})"
-            return StepResult(False, it, rel, inc, 1, message=message)
-        strain = assemble(m, ws, q, lam, False, state.mult)
-        rf = (ws.r - ws.f_ext)[free]
-        ref = max(np.linalg.norm(ws.r[free]), np.linalg.norm(ws.f_ext[free]), 1e-300)
-        rel = float(np.linalg.norm(rf) / ref)
-        grav = gravity_potential(state.q, m.q0, m.gravity_vector)
-        if self.guard.enabled:
-            flag, why = self._guard(state, u_p, strain)
-            if flag:
-                self.guard.rejections += 1
-                return StepResult(False, it, rel, inc, 1, 0.0, strain, grav, message=why, guard=flag)
-        return StepResult(True, it, rel, inc, 1, 0.0, strain, grav)
-
-    def _guard(self, state: State, u_p: float, u_end: float) -> tuple[str, str]:
-        """The step guard on the converged ``state.q`` (statics: ``Φ = U − f_ext·q`` + moments and
-        multiplier terms, from the Newton start): ``('', '')`` or (flag, reason)."""
-        m, ws, g = self.model, self.ws, self.guard
-        q = state.q
-        flag, why = g.orientation(q, state.lam)
-        if flag:
-            return flag, why
-        dq = q - self._q_p
-        w_ext = float(ws.f_ext @ dq)
-        w_mom = g.moment_work(q, self._q_p, ws.follower_scale, ws.cons_scale)
-        w_mult = float(state.mult @ (ws.rc - self._c_p)) if m.n_multipliers else 0.0
-        return g.potential_rise((-w_ext, -w_mom, w_mult), u_p, u_end, g.resolution(ws.r, ws.f_ext))
+        return self.fast.solve(state, t, lam)

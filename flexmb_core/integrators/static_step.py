@@ -1,19 +1,16 @@
 """One numba call per load increment of statics: Newton on ``f_int(q; λ(t)) = f_ext(t)``.
 
-:class:`NumbaStatic` runs the Newton loop of :meth:`StaticSolver._newton_steps
-<flexmb_core.integrators.static.StaticSolver>` inside :func:`static_newton`: a full Newton step per
-iteration (every element group, bars, shells, multipliers, moment loads; tangent, skyline LU
-factor and solve), the convergence test on the scaled increment and the constraint violation, the
-residual at the root, and the step guard's checks of a static root (orientation of the frame
-sections; the incremental potential ``Φ = U − f_ext·q`` + moment and multiplier terms must not
-rise). It calls the kernels of the Python loop in its order, so the states it reaches are
-bit-identical to it (``tests/unit/test_static_step.py``); the norms it reports (relative residual,
-the tangent's prediction of the step) are sums in a loop where numpy uses BLAS, so their last bits
-may differ.
-
-A tangent whose pivots the skyline LU must not take (near a critical point, where statics meets
-indefinite tangents) returns the increment to its start: :class:`StaticSolver` then makes it in
-Python, where SuperLU pivots.
+:class:`NumbaStatic` runs the Newton of a load increment of
+:class:`~flexmb_core.integrators.static.StaticSolver` inside :func:`static_newton`: a full Newton
+step per iteration (every element group, bars, shells, multipliers, moment loads; tangent, skyline
+LU factor and solve, with static pivoting, augmentation and refinement where the factors are
+suspect — near a critical point, where statics meets indefinite tangents:
+:func:`~.packs.factor_packed`, :func:`~.packs.solve_packed`), the convergence test on the scaled
+increment and the constraint violation, the residual at the root, and the step guard's checks of a
+static root (orientation of the frame sections; the incremental potential ``Φ = U − f_ext·q`` +
+moment and multiplier terms must not rise). It is the only Newton of statics: until 2026-11-29 a
+Python loop, bit-identical to it, made the increments whose tangent needed SuperLU; the step
+references of that time (``tests/step_cases.py``) hold it to those results.
 """
 
 from __future__ import annotations
@@ -25,21 +22,20 @@ from numba import njit
 
 from ..kernels.guard import energy_resolution, frame_orientation
 from ..model.assembly import update_load_scales
-from ..solvers.banded import _factor_kernel, _solve_kernel
 from ..solvers.result import StepResult
 from .energy import compact_csr, gravity_potential
-from .fast import INVERTED, NO_CONVERGENCE, NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, PIVOT, SVK_LIMIT
-from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BASE, L_BLK, L_CP, L_DQ,
-                    L_DRVIDX, L_DRVVAL, L_DSCALE, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_KDATA, L_LRH, L_LRL, L_LRP,
-                    L_LUWORK, L_MULTN, L_MVDOFS, L_PAR, L_PERM, L_Q0, L_QL, L_RC, L_RF, L_SLOT, L_URH, L_URL, L_URP,
-                    L_VEVAL, L_ZLAM, L_ZSLOT, N_PAR, NF, P_ACCUM, P_F0, P_KEEP, P_MAXIT, P_MINPIV, P_NFG,
-                    P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, moment_work_packed,
+from .fast import INVERTED, NO_CONVERGENCE, NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, SINGULAR, SVK_LIMIT
+from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_CP, L_DQ, L_DRVIDX, L_DRVVAL, L_DSCALE, L_FREE,
+                    L_FVDOFS, L_GRAV, L_INVS, L_KDATA, L_MULTN, L_MVDOFS, L_PAR, L_Q0, L_QL, L_RC, L_RF, L_VEVAL,
+                    L_ZLAM, N_PAR, NF, P_F0, P_KEEP, P_MAXIT, P_MINPIV, P_NFG, P_NMULT, P_PIVTOL, P_RISE, P_SVK, P_TOL,
+                    ModelPacks, assemble_packed, factor_packed, moment_work_packed, singular_note, solve_packed,
                     unknown_fields, view1, view2)
 
 RISE = 7            # the root raised the incremental potential (guard flag 'energy')
 
 # Output slots of io.
-(SO_IT, SO_REL, SO_INC, SO_STRAIN, SO_GRAV, SO_PRED, SO_X, SO_Y, SO_AUX, SO_GROUP, SO_UP, N_SO) = range(12)
+(SO_IT, SO_REL, SO_INC, SO_STRAIN, SO_GRAV, SO_PRED, SO_X, SO_Y, SO_AUX, SO_GROUP, SO_UP, SO_OMEGA,
+ N_SO) = range(13)
 
 
 @njit(cache=True, nogil=True)
@@ -53,10 +49,11 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
     ``io`` out (``SO_*``): iterations, relative residual at the root, last scaled increment,
     strain energy at the root, gravity energy, the first increment's norm over the positions (m),
     the guard's values (x, y: rise and size of Φ, or the section's det F / fibre stretch; aux:
-    its element; its frame group) and the strain energy at the Newton start.
+    its element; its frame group), the strain energy at the Newton start and the largest backward
+    error of the linear solves (:func:`~.packs.solve_packed`).
 
     Returns ``OK``, ``NO_CONVERGENCE``, ``NON_FINITE_RESIDUAL``, ``NON_FINITE_INCREMENT``,
-    ``PIVOT``, ``INVERTED``, ``SVK_LIMIT`` or ``RISE``.
+    ``SINGULAR`` (a tangent that cannot be factored), ``INVERTED``, ``SVK_LIMIT`` or ``RISE``.
     """
     par = view1(cf, lay[L_PAR])
     free = view1(ci, lay[L_FREE])
@@ -68,7 +65,7 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
     mult_n = view1(wf, lay[L_MULTN])
     q_p = view1(wf, lay[L_QL])           # the Newton start (the guard's Φ is measured from it)
     inv_scale = view1(wf, lay[L_INVS])
-    zero_v = view1(wf, lay[L_VEVAL])     # statics: no rates (ws.zero_v, ws.zero_lam_rate of the Python path)
+    zero_v = view1(wf, lay[L_VEVAL])     # statics: no rates
     zero_lam = view1(wf, lay[L_ZLAM])
     drv_idx = view1(ci, lay[L_DRVIDX])
     drv_val = view1(wf, lay[L_DRVVAL])
@@ -94,6 +91,7 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
     u_p = 0.0
     it = 0
     predicted = -1.0
+    io[SO_OMEGA] = 0.0
     for it in range(1, max_it + 1):
         strain, _ = assemble_packed(q, zero_v, lam, zero_lam, 0.0, want_k, no_dlam, mult, r, kdata, cf, ci, wf,
                                     wi, lay, par)
@@ -117,17 +115,13 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
         if not finite:
             code = NON_FINITE_RESIDUAL
             break
-        step = _factor_kernel(kdata, kdata, 0.0, view1(wi, lay[L_SLOT]), par[P_ACCUM] != 0.0,
-                              view1(wi, lay[L_ZSLOT]), view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]),
-                              view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH]), view1(wi, lay[L_URP]), view1(wi, lay[L_URL]),
-                              view1(wi, lay[L_URH]), view1(wi, lay[L_BLK]), env, inv_diag, par[P_PIVTOL], lu_stats,
-                              nmult)
-        if step >= 0 or not lu_stats[0] > 0.0 or lu_stats[1] < par[P_MINPIV] * lu_stats[0]:
-            code = PIVOT
+        if not factor_packed(kdata, kdata, 0.0, env, inv_diag, lu_stats, nmult, wf, wi, lay, par):
+            code = SINGULAR
             break
-        _solve_kernel(rf, view1(wi, lay[L_PERM]), view1(wi, lay[L_BASE]), view1(wi, lay[L_LRP]),
-                      view1(wi, lay[L_LRL]), view1(wi, lay[L_LRH]), view1(wi, lay[L_URP]), view1(wi, lay[L_URL]),
-                      view1(wi, lay[L_URH]), env, inv_diag, view1(wf, lay[L_LUWORK]), dq)
+        # an inaccurate solve (a singular tangent) still gives a regularized direction (fast.py)
+        omega = solve_packed(rf, dq, env, inv_diag, lu_stats, wf, wi, lay, par)
+        if omega > io[SO_OMEGA]:
+            io[SO_OMEGA] = omega
         finite = True
         for i in range(nf + nmult):
             if not math.isfinite(dq[i]):
@@ -141,7 +135,7 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
                 s += wmask[k] * dq[k] * dq[k]
             predicted = math.sqrt(s)
         inc = 0.0
-        for k in range(nf):              # the Python loop solves −rf and adds: the same bits
+        for k in range(nf):
             q[free[k]] -= dq[k]
             x = abs(dq[k]) * inv_scale[k]
             if x > inc:
@@ -165,7 +159,7 @@ def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci
     io[SO_REL] = rel
     io[SO_PRED] = predicted
     if code != OK:
-        if code == PIVOT or par[P_KEEP] == 0.0:     # accept_flagged keeps the iterate, as Python does
+        if par[P_KEEP] == 0.0:                       # accept_flagged keeps the iterate
             for i in range(n):
                 q[i] = q_p[i]
             for i in range(nmult):
@@ -248,10 +242,10 @@ class NumbaStatic:
         self._wmask = np.ascontiguousarray(solver._w, dtype=np.float64)
         self._io = np.zeros(N_SO)
 
-    def solve(self, state, t: float, lam: np.ndarray) -> StepResult | None:
+    def solve(self, state, t: float, lam: np.ndarray) -> StepResult:
         """The equilibrium at pseudo-time ``t`` from ``state.q`` (loads, stretches and drives at
-        ``t``), as ``StaticSolver._newton_steps`` reaches it; None when the Python loop must make
-        it (a pivot for SuperLU), with ``state`` as it was."""
+        ``t``); on failure ``state`` is as it was (under ``accept_flagged``: at the last
+        iterate)."""
         solver, m, ws, p = self.solver, self.model, self.solver.ws, self.packs
         state.lam[:] = lam
         state.t = t
@@ -266,25 +260,25 @@ class NumbaStatic:
                              self._wmask, cf, ci, wf, wi, p.lay, self._io, guard.enabled)
         io = self._io
         it, inc, rel = int(io[SO_IT]), io[SO_INC], io[SO_REL]
-        if code == PIVOT:
-            return None
         if solver._predicted < 0.0 and io[SO_PRED] >= 0.0:     # the first increment of the load step
             solver._predicted = io[SO_PRED]
-        if code in (OK, INVERTED, SVK_LIMIT, RISE):
-            solver.lu._active = sky              # the root's tangent is the skyline's factor
-            sky._factored = True
         strain, grav = io[SO_STRAIN], io[SO_GRAV]
         if guard.enabled and code in (OK, RISE):
             guard.last_rise, guard.last_size = io[SO_X], io[SO_Y]
         if code == OK:
             return StepResult(True, it, rel, inc, 1, 0.0, strain, grav)
+        note = singular_note(io[SO_OMEGA])
         if code == NO_CONVERGENCE:
             return StepResult(False, it, rel, inc, 1,
-                              message=f"no convergence in {solver.spec.max_iterations} iterations (increment {inc:.2e})")
+                              message=f"no convergence in {solver.spec.max_iterations} iterations (increment {inc:.2e})"
+                                      f"{note}")
         if code == NON_FINITE_RESIDUAL:
-            return StepResult(False, it, rel, inc, 1, message=f"non-finite residual at iteration {it}")
+            return StepResult(False, it, rel, inc, 1, message=f"non-finite residual at iteration {it}{note}")
         if code == NON_FINITE_INCREMENT:
-            return StepResult(False, it, rel, inc, 1, message=f"non-finite increment at iteration {it}")
+            return StepResult(False, it, rel, inc, 1, message=f"non-finite increment at iteration {it}{note}")
+        if code == SINGULAR:
+            return StepResult(False, it, rel, inc, 1,
+                              message=f"singular tangent at iteration {it} (a non-finite pivot, or a zero matrix)")
         guard.rejections += 1
         if code == INVERTED:
             group = m.frame_groups[int(io[SO_GROUP])]

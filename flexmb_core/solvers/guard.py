@@ -46,6 +46,11 @@ step on a nonlinear problem), 0.6 % elsewhere; the spurious roots gain 65× (spi
 Cost: per step one call of :func:`flexmb_core.kernels.guard.frame_orientation` per frame group
 and one of :func:`flexmb_core.kernels.guard.dynamic_guard` (a few passes over the unknowns, mass
 rows of the driven DOFs only); no assembly, no mat-vec.
+
+The checks run inside the numba steps (:func:`flexmb_core.integrators.fast.model_step`,
+:func:`flexmb_core.integrators.static_step.static_newton`); :class:`StepGuard` holds what they need
+(the frame stations, the energy ledger of dynamics), formats their refusals, and checks a state's
+orientation from Python (:meth:`StepGuard.orientation`).
 """
 
 from __future__ import annotations
@@ -54,9 +59,7 @@ import math
 
 import numpy as np
 
-from ..kernels.guard import (conservative_moment_work, drive_reactions, dynamic_guard, energy_resolution,
-                             frame_orientation)
-from ..kernels.moments import follower_moments
+from ..kernels.guard import drive_reactions, frame_orientation
 from ..model.model import Model
 from ..model.shape import gauss_legendre, lagrange_1d
 from ..model.step_data import drive_dof_ids
@@ -101,11 +104,6 @@ class StepGuard:
         self.last_gain = self.last_scale = 0.0
         n = model.ndof
         self._stations = [self._frame_stations(model, g) for g in model.frame_groups]
-        mo = model.moments
-        self._has_moments = bool(mo.follower_vdofs.shape[0] or mo.cons_vdofs.shape[0])
-        self._rm = np.zeros(n)
-        self._kdummy = np.zeros(0)
-        self._zero = np.zeros(n)
         # Energy ledger of dynamics: the last accepted state (t, q, v), its K + U, its loads and
         # drive reactions. ``_gvec`` rows: two sets (f, q, v) — the ledger's at ``_il``, the
         # candidate end state of the step under way at 3 − ``_il`` — then the last Newton
@@ -159,14 +157,6 @@ class StepGuard:
     def _e(self) -> float:
         return float(self._led[3])
 
-    @property
-    def _cand_e(self) -> float:
-        return float(self._led[4])
-
-    @_cand_e.setter
-    def _cand_e(self, e: float) -> None:
-        self._led[4] = e
-
     # -- check 1 -------------------------------------------------------------------------------
     def orientation(self, q: np.ndarray, lam: np.ndarray) -> tuple[str, str]:
         """``('', '')`` or (flag, why): the configuration is not a physical one — an
@@ -180,96 +170,6 @@ class StepGuard:
             if smin < SVK_LIMIT_STRETCH:
                 return "svk_limit", (f"step guard: fibre stretch {smin:.3g} below 1/√3, the compressive limit "
                                      "point of the Saint-Venant–Kirchhoff law")
-        return "", ""
-
-    # -- check 2 -------------------------------------------------------------------------------
-    def moment_work(self, q: np.ndarray, q_p: np.ndarray, follower_scale: np.ndarray,
-                    cons_scale: np.ndarray) -> float:
-        """Work of the moment loads from ``q_p`` to ``q`` (J): exact for the conservative ones,
-        trapezoidal rule for follower moments (they have no potential)."""
-        if not self._has_moments:
-            return 0.0
-        mo = self.model.moments
-        w = 0.0
-        if mo.cons_vdofs.shape[0]:
-            w += conservative_moment_work(q, q_p, mo.cons_vdofs, mo.cons_axes, mo.cons_magnitude, cons_scale)
-        if mo.follower_vdofs.shape[0]:
-            r = self._rm
-            r[:] = 0.0
-            for x in (q_p, q):
-                follower_moments(x, mo.follower_vdofs, mo.follower_mbody, follower_scale, mo.follower_smap,
-                                 False, r, self._kdummy)
-            w += 0.5 * float(r @ (q_p - q))        # the kernel subtracts the load: r = −(f(q_p) + f(q))
-        return w
-
-    def resolution(self, r_int: np.ndarray, f_ext: np.ndarray) -> float:
-        """Energy resolution of a static state converged to the Newton tolerance (J); see
-        :func:`flexmb_core.kernels.guard.energy_resolution`."""
-        m = self.model
-        return energy_resolution(m.free, m.dof_scale, self.tolerance, r_int, f_ext)
-
-
-    def potential_rise(self, terms: tuple[float, ...], u_start: float, u_end: float,
-                       floor: float) -> tuple[str, str]:
-        """``('', '')`` or ``('energy', why)``: the root raised the incremental potential.
-
-        ``terms``: the non-strain parts of ``Φ(q) − Φ(q_p)`` (J), already signed; ``floor``: the
-        energy resolution of the converged state, below which a rise is round-off (e.g. the
-        first, unloaded increment of a static run)."""
-        rise = (u_end - u_start) + sum(terms)
-        size = abs(u_end) + abs(u_start) + sum(abs(t) for t in terms)
-        self.last_rise, self.last_size = rise, size
-        if rise > self.rise_tolerance * size and rise > floor:
-            return "energy", (f"step guard: spurious Newton root — the step's incremental potential rose by "
-                              f"{rise:.3g} J (strain energy {u_start:.4g} → {u_end:.4g} J); a physical root "
-                              "lowers it")
-        return "", ""
-
-    # -- dynamics: checks 1–3, one kernel call ------------------------------------------------
-    def dynamic(self, integ, state, dq: np.ndarray, rf: np.ndarray, c_p: np.ndarray, c_v: float,
-                af_force: float, u_p: float, u_last: float, diss_p: float, kinetic: float, t_n: float,
-                balance: bool) -> tuple[str, str]:
-        """All checks of a converged dynamic step: ``('', '')`` or (flag, reason).
-
-        ``integ``: the :class:`~flexmb_core.integrators.dynamic.DynamicIntegrator` (its rows
-        ``_ivec`` = q_n, v_n, a_n, ã_n, q̂, q_p and ``g_p = M(a + c_m v) − f_ext`` on the free DOFs
-        at the Newton start, kept by ``inertial_residual``); ``dq, rf``: the
-        last Newton increment and the residual it solved; ``c_p``: the constraint violations at
-        the Newton start; ``c_v = ∂v/∂q``; ``af_force``: the Chung–Hulbert force weight
-        (potential U(q_{n+1−αf})/(1−αf)), else 0; ``u_p, diss_p``: strain energy and dissipation
-        at the Newton start, ``u_last`` at the last iterate; ``kinetic``: at the accepted state;
-        ``balance``: run check 3 (no actuator moved, not Chung–Hulbert)."""
-        m, ws = self.model, integ.ws
-        q = state.q
-        if self._stations:
-            flag, why = self.orientation(q, state.lam)
-            if flag:
-                return flag, why
-        extra_p = extra_size = w_mom = 0.0
-        if self._has_moments:
-            q_l = q.copy()
-            q_l[m.free] += dq[:m.nfree]
-            q_p = integ._ivec[5]
-            w = self.moment_work(q_l, q_p, ws.follower_scale, ws.cons_scale)
-            extra_p, extra_size = -w, abs(w)
-            w_mom = self.moment_work(q, integ._ivec[0], ws.follower_scale, ws.cons_scale)
-        if integ._damped:
-            w = (ws.dissipation - diss_p) / (2.0 * c_v)
-            extra_p += w
-            extra_size += abs(w)
-        if m.n_multipliers:
-            w = float(state.mult @ (ws.rc - c_p))
-            extra_p += w
-            extra_size += abs(w)
-        code, x, y, e = dynamic_guard(
-            q, dq, m.free, m.dof_scale, integ._ivec, self._gvec, self._il, self._react, self._ir, *integ._mass,
-            ws.f_ext, ws.r, rf, state.a, state.v, self._drive_ids, m.mass_damping, c_v, self.tolerance,
-            self._c_mass, self.rise_tolerance, self.balance_tolerance, u_p, u_last, 1.0 / (1.0 - af_force),
-            extra_p, extra_size, w_mom, kinetic, self._e, balance and self._t == t_n)
-        self._cand_e = e
-        if code:
-            return "energy", self.energy_message(code, x, y, e, u_p, u_last)
-        self.last_gain, self.last_scale = x, y
         return "", ""
 
     def energy_message(self, code: int, x: float, y: float, e_end: float, u_p: float, u_last: float) -> str:
@@ -294,15 +194,6 @@ class StepGuard:
         self._gvec[il + 1] = q
         self._gvec[il + 2] = v
         drive_reactions(r_int, a, v, m.mass_damping, *m.mass_csr, f_ext, self._drive_ids, self._react[self._ir])
-
-    def ledger_accept(self, t: float) -> None:
-        """The step to ``t`` that :meth:`dynamic` passed was accepted: its end state (written by
-        that call into the candidate rows) becomes the ledger's."""
-        led = self._led
-        led[2] = t
-        led[3] = led[4]
-        led[0] = 3.0 - led[0]
-        led[1] = 1.0 - led[1]
 
     def ledger_save(self) -> None:
         """Keep the ledger of the step's start (sub-steps and roll-backs restore it)."""

@@ -385,10 +385,72 @@ def test_each_kernel_compiles_one_signature():
     SkylineLU(p.n, p.indptr, p.indices, ordering="natural").factor(a.data)
     kkt = _kkt(Problem("stewart"))
     SkylineLU(kkt.shape[0], kkt.indptr, kkt.indices, late=6).factor(kkt.data)
+    pivoting = SkylineLU(p.n, p.indptr.astype(np.int32), p.indices, static_pivot=banded.STATIC_PIVOT)
+    pivoting.factor(a.data)
+    pivoting.refine(list(a.data), np.ones(p.n, dtype=np.float32), pivoting.solve(np.ones(p.n)))
     kernels = {name: obj for name, obj in vars(banded).items()
                if isinstance(obj, numba.core.registry.CPUDispatcher)}
-    assert len(kernels) == 6, sorted(kernels)
+    assert len(kernels) == 7, sorted(kernels)
     for name, disp in kernels.items():
         assert len(disp.signatures) == 1, \
             f"{name} compiled {len(disp.signatures)} signatures: {disp.signatures}"
         assert disp._cache.__class__.__name__ != "NullCache", f"{name} lacks cache=True"
+
+
+# ---------------------------------------------------------------------------------------------
+# static pivoting and refinement (the Newton steps' linear solves)
+# ---------------------------------------------------------------------------------------------
+
+def _saddle():
+    """[[0, 1, 0], [1, 2, 1], [0, 1, 3]]: non-singular (det = −3) with a zero first pivot — the
+    zero leading minor a multiplier row or a free spin gives an LU without pivoting."""
+    dense = np.array([[0.0, 1.0, 0.0], [1.0, 2.0, 1.0], [0.0, 1.0, 3.0]])
+    a = sp.csr_matrix(dense + 1e-300 * np.eye(3))          # keep the zero diagonal entry stored
+    a.data[a.data == 1e-300] = 0.0
+    return dense, a
+
+
+def test_static_pivoting_replaces_a_zero_pivot_and_refinement_recovers_the_solution():
+    dense, a = _saddle()
+    lu = SkylineLU(3, a.indptr, a.indices, ordering="natural", static_pivot=banded.STATIC_PIVOT)
+    lu.factor(a.data)
+    assert lu.replaced_pivots == 1
+    b = np.array([1.0, 2.0, 3.0])
+    x = lu.solve(b)
+    exact = np.linalg.solve(dense, b)
+    assert _rel_err(x, exact) > 1e-9                       # the factors are a nearby matrix's (error ~ √ε)
+    omega = lu.refine(a.data, b, x)
+    assert omega <= banded.BACKWARD_ERROR_TOL
+    assert _rel_err(x, exact) < 1e-14
+
+
+def test_refinement_reports_a_singular_matrix():
+    """[[1, 1], [1, 1]]: the second pivot is exactly zero and no x solves A x = (1, 2)."""
+    lu = SkylineLU(2, np.array([0, 2, 4]), np.array([0, 1, 0, 1]), static_pivot=banded.STATIC_PIVOT)
+    data = np.array([1.0, 1.0, 1.0, 1.0])
+    lu.factor(data)
+    assert lu.replaced_pivots == 1
+    b = np.array([1.0, 2.0])
+    x = lu.solve(b)
+    # x solves a matrix within √ε of A (|x| ~ 1/√ε): its backward error stays far above the bound
+    assert lu.refine(data, b, x) > 100 * banded.BACKWARD_ERROR_TOL
+
+
+def test_fixed_pattern_solver_refines_suspect_factors_and_refuses_singular_ones():
+    from flexmb_core.solvers.linear import FixedPatternSolver, SingularMatrixError
+
+    dense, a = _saddle()
+
+    class _Pattern:                                        # the model attributes the solver reads
+        nsys, nnz, n_multipliers = 3, a.nnz, 0
+        indptr, indices = a.indptr.astype(np.int64), a.indices.astype(np.int64)
+
+    solver = FixedPatternSolver(_Pattern())
+    solver.factor(a.data.copy())
+    b = np.array([1.0, 2.0, 3.0])
+    assert _rel_err(solver.solve(b), np.linalg.solve(dense, b)) < 1e-14
+    assert solver.refined == 1
+    singular = np.array([1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0])     # rows 0 and 1 both (1, 1, 0): rank 2
+    solver.factor(singular)
+    with pytest.raises(SingularMatrixError, match=r"singular matrix: backward error .* after refinement, above 1e-11"):
+        solver.solve(b)
