@@ -121,9 +121,11 @@ def _factor(kdata, mass, coef, env, inv_diag, stats, nmult, wi, lay, par):
 
 @register_jitable
 def augment(kdata, dmax, wi, lay):
-    """``K += ρ GᵀG`` in place on the tangent ``kdata``, with ``ρ = max |diag A| / max diag GᵀG``
-    (the constraint rows ``G`` are the multiplier rows of ``kdata``; every pair of DOFs of one
-    constraint is in the pattern already, :func:`augmentation_maps`). Returns ``ρ``."""
+    """``K += ρ GᵀG`` in place on the tangent ``kdata``, with ``ρ = dmax / max G_ij²`` (``dmax``:
+    the largest |diagonal| of the system, so that ``ρ GᵀG`` is of the stiffness's size; the
+    constraint rows ``G`` are the multiplier rows of ``kdata``; every pair of DOFs of one
+    constraint is in the pattern already, :func:`augmentation_maps`). Returns ``ρ`` (0 when ``G``
+    is zero: nothing added)."""
     src_a, src_b, dst = view1(wi, lay[L_AUGA]), view1(wi, lay[L_AUGB]), view1(wi, lay[L_AUGD])
     gg = 0.0
     for t in range(dst.size):
@@ -175,22 +177,22 @@ def augmentation_maps(model: Model) -> tuple[np.ndarray, ...]:
     free DOFs, their CSR positions ``(a, b)`` and that of ``(j, k)`` (``d``); and every such entry's
     position with its system row (``pos, row``). All int64; empty without multipliers."""
     nf, ns = model.nfree, model.nsys
-    indptr, indices = np.asarray(model.indptr), np.asarray(model.indices)
-    a, b, d, pos, row = [], [], [], [], []
-    for r in range(nf, ns):
-        ps = [p for p in range(indptr[r], indptr[r + 1]) if indices[p] < nf]
-        for p1 in ps:
-            pos.append(p1)
-            row.append(r)
-            j = indices[p1]
-            cols = indices[indptr[j]:indptr[j + 1]]
-            for p2 in ps:
-                k = np.searchsorted(cols, indices[p2])
-                if k == cols.size or cols[k] != indices[p2]:
-                    raise ValueError(f"augmentation_maps: ({j}, {indices[p2]}) is not in the pattern")
-                a.append(p1)
-                b.append(p2)
-                d.append(indptr[j] + k)
+    indptr, indices = np.asarray(model.indptr, dtype=np.int64), np.asarray(model.indices, dtype=np.int64)
+    rows = np.repeat(np.arange(ns, dtype=np.int64), np.diff(indptr))
+    pos = np.nonzero((rows >= nf) & (indices < nf))[0]      # G's entries, row by row (CSR order)
+    row = rows[pos]
+    _, first, count = np.unique(row, return_index=True, return_counts=True)
+    size = np.repeat(count, count)                           # the size of each entry's row
+    a = np.repeat(pos, size)
+    offset = np.arange(a.size) - np.repeat(np.cumsum(size) - size, size)
+    b = pos[np.repeat(np.repeat(first, count), size) + offset]
+    want = indices[a] * ns + indices[b]
+    keys = rows * ns + indices                               # sorted: CSR rows, sorted columns
+    d = np.searchsorted(keys, want)
+    missing = (d >= keys.size) | (keys[np.minimum(d, keys.size - 1)] != want)
+    if missing.any():
+        k = int(np.argmax(missing))
+        raise ValueError(f"augmentation_maps: ({want[k] // ns}, {want[k] % ns}) is not in the pattern")
     return tuple(np.asarray(x, dtype=np.int64) for x in (a, b, d, pos, row))
 
 

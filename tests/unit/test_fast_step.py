@@ -62,3 +62,38 @@ def test_chung_hulbert_with_multipliers_is_refused_when_the_simulator_is_built()
         Simulator(model)
     model, sim = sc.build(sc.b1(integrator="chung_hulbert"))
     assert NumbaStep.unsupported(model, sim.spec) == ""
+
+
+def test_the_augmented_system_has_the_solution_of_the_constrained_one():
+    """factor_packed's remedy for a zero pivot of a multiplier model: K + ρGᵀG in the free block
+    and ρGᵀc added to the right-hand side give the very solution of [K Gᵀ; G 0] (the rigid corner
+    of the right-angle cantilever, at a perturbed state with multipliers)."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from flexmb_core.integrators.packs import augment
+    from flexmb_core.model.assembly import assemble
+
+    sim = sc.scene_sim("right_angle_cantilever")
+    m, ws = sim.model, sim.ws
+    rng = np.random.default_rng(3)
+    q = m.q0.copy()
+    q[m.free] += 1e-3 * rng.standard_normal(m.nfree)
+    mult = rng.standard_normal(m.n_multipliers)
+    assemble(m, ws, q, sim.state.lam, True, mult)
+    plain = sp.csr_matrix((ws.kdata, m.indices, m.indptr), shape=(m.nsys, m.nsys)).toarray()
+    kdata = ws.kdata.copy()
+    packs = sim._dynamic.fast.packs
+    rho = augment(kdata, np.abs(np.diag(plain)).max(), packs.packs[3], packs.lay)
+    augmented = sp.csr_matrix((kdata, m.indices, m.indptr), shape=(m.nsys, m.nsys)).toarray()
+    nf = m.nfree
+    g = plain[nf:, :nf]
+    assert rho > 0.0
+    np.testing.assert_allclose(augmented[:nf, :nf] - plain[:nf, :nf], rho * g.T @ g, rtol=1e-12,
+                               atol=1e-12 * rho * np.abs(g).max() ** 2)
+    assert np.array_equal(augmented[nf:], plain[nf:]) and np.array_equal(augmented[:, nf:], plain[:, nf:])
+    b = rng.standard_normal(m.nsys)
+    b_aug = b.copy()
+    b_aug[:nf] += rho * g.T @ b[nf:]
+    x, x_aug = np.linalg.solve(plain, b), np.linalg.solve(augmented, b_aug)
+    assert np.abs(x_aug - x).max() <= 1e-9 * np.abs(x).max()
