@@ -10,6 +10,7 @@ import pytest
 from builders import build, cantilever, free_beam
 from flexmb_core.kernels.guard import conservative_moment_work
 from flexmb_core.solvers.guard import SVK_LIMIT_STRETCH, StepGuard
+from step_cases import spin_tumble
 
 
 def _beam(elements=4):
@@ -113,13 +114,7 @@ def _tumbling_trapezoidal(policy):
     converges onto a spurious root at step 126."""
     d = free_beam(integrator="newmark", dt=1e-3, tolerance=1e-10, on_unconverged=policy)
     model, sim = build(d)
-    omega, centre = np.array([0.0, 3.0, 20.0]), np.array([0.5, 0.0, 0.0])
-    q, v = sim.state.q, sim.state.v
-    for b in model.node_ydofs:
-        v[b] = np.cross(omega, q[b] - centre) + np.array([0.0, 0.0, 0.5 * math.cos(math.pi * q[b[0]])])
-    for mem in model.members:
-        for b in mem.vdofs.reshape(-1, 3):
-            v[b] = np.cross(omega, q[b])
+    spin_tumble(model, sim)
     sim.initialize()
     return model, sim
 
