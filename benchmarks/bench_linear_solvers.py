@@ -145,7 +145,7 @@ def bench(name, n, a, repeats):
     lu = SkylineLU(n, a.indptr, a.indices)
     setup_ms = 1e3 * (time.perf_counter() - t0)
     x = np.empty(n)
-    a_t = sp.csc_matrix((a.data, a.indices, a.indptr), shape=(n, n))   # what linear.SparseLU does
+    a_t = sp.csc_matrix((a.data, a.indices, a.indptr), shape=(n, n))   # CSR of A = CSC of Aᵀ (no copy)
 
     def sky_both():
         lu.factor(a.data)

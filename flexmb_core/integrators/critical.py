@@ -27,8 +27,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..model.model import Model
-from ..solvers.banded import SingularPivotError, SkylineLU
-from ..solvers.linear import SparseLU
+from ..solvers.banded import STATIC_PIVOT, SkylineLU
 
 
 class TangentLU:
@@ -36,27 +35,31 @@ class TangentLU:
 
     Without multipliers the skyline LU keeps its cheapest ordering. With multipliers the free DOFs
     are numbered first (reverse Cuthill–McKee) and the multipliers last, so no zero pivot of the
-    constraint block is met before the DOFs it couples. Where the skyline meets a zero pivot
-    anyway, SuperLU with partial pivoting solves and the count is unknown (``None``); where it
-    only meets a tiny one (a model without multipliers next to a critical point) the count stands
-    and SuperLU solves.
+    constraint block is met before the DOFs it couples. A (near-)zero pivot met anyway is replaced
+    by a small one of its sign (static pivoting, :class:`~flexmb_core.solvers.banded.SkylineLU`)
+    and the count is unknown (``None``); the solves of such factors, and of factors with a tiny
+    pivot (a model without multipliers next to a critical point, whose count stands), are refined
+    against the tangent itself (:meth:`~flexmb_core.solvers.banded.SkylineLU.refine`). Near a
+    critical point that is what a solve with partial pivoting gave (SuperLU did these solves until
+    2026-11-29: ``tests/verification/test_path_following.py`` traces the same paths).
 
     Attributes
     ----------
     negative_pivots : int | None — of the last factorization.
-    fallbacks : int — factorizations SuperLU had to do.
+    refined : int — factorizations whose solves were refined.
     """
 
     def __init__(self, model: Model, *, min_pivot_ratio: float = 1e-10):
         n, nf = model.nsys, model.nfree
         self.min_pivot_ratio = min_pivot_ratio
         self.negative_pivots: int | None = None
-        self.fallbacks = 0
-        self._superlu = SparseLU(model)
-        self._skyline_ok = False
+        self.refined = 0
+        self._suspect = False
+        self._matrix = np.zeros(model.nnz)        # the suspect factors' matrix (permuted), to refine against
+        self._b = np.zeros(n)
         self._perm: np.ndarray | None = None
         if model.n_multipliers == 0:
-            self.lu = SkylineLU(n, model.indptr, model.indices)
+            self.lu = SkylineLU(n, model.indptr, model.indices, static_pivot=STATIC_PIVOT)
             return
         ones = sp.csr_matrix((np.ones(model.nnz), model.indices, model.indptr), shape=(n, n))
         kff = ones[:nf, :nf]
@@ -68,38 +71,35 @@ class TangentLU:
         pos.sort_indices()
         self._perm = perm
         self._map = np.ascontiguousarray(pos.data.astype(np.int64) - 1)
-        self._buf = np.zeros(model.nnz)
-        self._b = np.zeros(n)
-        self.lu = SkylineLU(n, pos.indptr.astype(np.int64), pos.indices.astype(np.int64), ordering="natural")
+        self.lu = SkylineLU(n, pos.indptr.astype(np.int64), pos.indices.astype(np.int64), ordering="natural",
+                            static_pivot=STATIC_PIVOT)
 
     def factor(self, kdata: np.ndarray) -> None:
-        """Factor the tangent ``kdata (nnz,)``; ``RuntimeError`` when it is singular."""
+        """Factor the tangent ``kdata (nnz,)``; ``RuntimeError`` when it cannot (a non-finite
+        pivot, a zero matrix)."""
         data = kdata
         if self._perm is not None:
-            np.take(kdata, self._map, out=self._buf)
-            data = self._buf
-        try:
-            self.lu.factor(data)
-        except SingularPivotError:
-            self._skyline_ok, self.negative_pivots = False, None
-        else:
-            self.negative_pivots = self.lu.negative_pivots
-            # a tiny pivot of the free block is near-singular K (solve with pivoting then); with
-            # multipliers the last pivots are Schur complements −G K⁻¹ Gᵀ, small by their units
-            self._skyline_ok = self._perm is not None or self.lu.min_pivot_ratio >= self.min_pivot_ratio
-        if self._skyline_ok:
-            return
-        self.fallbacks += 1
-        self._superlu.factor(kdata)            # raises RuntimeError if truly singular
+            np.take(kdata, self._map, out=self._matrix)
+            data = self._matrix
+        self.lu.factor(data)
+        replaced = self.lu.replaced_pivots > 0
+        self.negative_pivots = None if replaced else self.lu.negative_pivots
+        # with multipliers the last pivots are Schur complements −G K⁻¹ Gᵀ, small by their units
+        self._suspect = replaced or (self._perm is None and self.lu.min_pivot_ratio < self.min_pivot_ratio)
+        if self._suspect:
+            self.refined += 1
+            if data is not self._matrix:
+                self._matrix[:] = data
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """``x (nsys,)`` with the last factorization."""
-        if not self._skyline_ok:
-            return self._superlu.solve(b)
+        """``x (nsys,)`` with the last factorization (refined when its factors are suspect: the
+        best solution refinement reaches, which the caller's Newton then judges)."""
+        bp = b if self._perm is None else np.take(b, self._perm, out=self._b)
+        y = self.lu.solve(bp)
+        if self._suspect:
+            self.lu.refine(self._matrix, bp, y)
         if self._perm is None:
-            return self.lu.solve(b)
-        np.take(b, self._perm, out=self._b)
-        y = self.lu.solve(self._b)
+            return y
         x = np.empty_like(y)
         x[self._perm] = y
         return x

@@ -103,8 +103,8 @@ class SingularPivotError(FlexmbError, RuntimeError):
         what = "not finite" if not np.isfinite(self.pivot) else f"too small (|pivot| <= {self.threshold:.3g})"
         super().__init__(
             f"LU without pivoting: pivot {self.pivot:.6g} of matrix row {self.row} (elimination step "
-            f"{self.step}) is {what}; the matrix is singular or needs pivoting — fall back to a "
-            f"pivoting solver such as scipy.sparse.linalg.splu")
+            f"{self.step}) is {what}; the matrix is singular or needs pivoting — factor with static_pivot "
+            f"and refine the solves, or use a pivoting solver such as scipy.sparse.linalg.splu")
 
 
 class NotFactoredError(FlexmbError, RuntimeError):
@@ -792,9 +792,10 @@ def _refine_kernel(data, data2, coef, indptr, indices, b, x, perm, base, lrun_pt
     free block (the vectors of two members that only the multipliers tie) makes ``‖M⁻¹E‖ ≈ 1``.
     Arrays as in :func:`_solve_kernel`; ``res, corr`` (n,) scratch; ``basis (m + 1, n)``,
     ``hess (m + 1, m)``, ``rot (3, m + 1)`` the Krylov scratch of GMRES(m); at most
-    :data:`REFINE_CYCLES` restarts. It stops as soon as ``ω = ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞)`` is at or below
-    :data:`BACKWARD_ERROR_TOL` (with no iteration when ``x`` already is), or when a cycle does not
-    lower it (a cycle that raised it is undone). ``x`` (n,) is refined in place.
+    :data:`REFINE_CYCLES` restarts. It stops as soon as the normwise backward error
+    ``ω = ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞)`` is at or below :data:`BACKWARD_ERROR_TOL` (with no
+    iteration when ``x`` already is), or when a cycle does not lower it (a cycle that raised it is
+    undone). ``x`` (n,) is refined in place.
 
     Returns
     -------

@@ -10,19 +10,17 @@ against the matrix itself and its backward error checked; above
 The numba steps of dynamics and statics do the same in their kernels
 (:func:`~flexmb_core.integrators.packs.factor_packed`, :func:`~flexmb_core.integrators.packs.solve_packed`).
 
-Suspect factors used to go to SuperLU with partial pivoting instead. On every such tangent of the
-test suite (2026-11-29) the skyline's solve had the same backward error as SuperLU's (3e-17 to
-2e-16 against 4e-17 to 3e-16), and the (near-)zero pivots that stopped it were the multipliers' and
-free spins' zero leading minors, which static pivoting and refinement solve.
-:class:`~flexmb_core.integrators.critical.TangentLU` (the inertia count of path following) keeps
-SuperLU where the skyline cannot count.
+Suspect factors used to go to SuperLU with partial pivoting instead (until 2026-11-29). On every
+such tangent of the test suite the skyline's solve had the same backward error as SuperLU's (3e-17
+to 2e-16 against 4e-17 to 3e-16), and the (near-)zero pivots that stopped it were mechanisms and
+the zero leading minors of multiplier models, which static pivoting, the augmented system and
+refinement solve. :class:`~flexmb_core.integrators.critical.TangentLU` (the inertia count of path
+following and of the snap-through monitor) factors and refines the same way.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from ..errors import FlexmbError
 from ..model.model import Model
@@ -32,25 +30,6 @@ from .banded import BACKWARD_ERROR_TOL, STATIC_PIVOT, SkylineLU
 class SingularMatrixError(FlexmbError, RuntimeError):
     """A solve's backward error stayed above :data:`~.banded.BACKWARD_ERROR_TOL` after refinement:
     the matrix is singular to working precision."""
-
-
-class SparseLU:
-    """SuperLU on the model pattern (:class:`~flexmb_core.integrators.critical.TangentLU`). The CSR
-    arrays of ``A`` are the CSC arrays of ``Aᵀ``: factor that without copying the pattern and solve
-    with ``trans='T'``."""
-
-    def __init__(self, model: Model):
-        self.n = model.nsys
-        self.indptr = model.indptr
-        self.indices = model.indices
-        self._lu = None
-
-    def factor(self, data: np.ndarray) -> None:
-        a_t = sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n, self.n))
-        self._lu = splu(a_t)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        return self._lu.solve(b, trans="T")
 
 
 class FixedPatternSolver:
