@@ -12,7 +12,8 @@ load factor λ, an unknown: equilibrium is ``R(x, λ) = r(q; λ) − λ f_ref = 
 - **displacement control** (``control: displacement``): one displacement component of a node
   is prescribed, stepped to ``solver.displacement.to``.
 
-Each Newton iteration factors the tangent K once and solves for two right-hand sides,
+Each Newton iteration (all of them in one numba call per attempted step,
+:func:`~.path_step.path_correct`) factors the tangent K once and solves for two right-hand sides,
 ``δx_R = −K⁻¹R`` and ``δx_t = K⁻¹ p`` with ``p = −∂R/∂λ`` (the reference load minus the
 configuration-dependent moment loads per unit λ); the correction is ``δx = δx_R + δλ δx_t``.
 For the arc length δλ is a root of the quadratic constraint; the root kept is the one whose new
@@ -47,6 +48,10 @@ from ..scene.schema import DofComponent, PathStepSpec, Scene
 from ..solvers.result import StepResult
 from .critical import PathPoint, TangentLU, classify
 from .energy import gravity_potential
+from .fast import NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, SINGULAR
+from .packs import singular_note
+from .path_step import (ARC, FIXED, N_PO, NO_RESPONSE, NO_ROOT, PO_DISC, PO_INC, PO_IT, PO_LAM, PO_OMEGA,
+                        path_correct)
 
 if TYPE_CHECKING:
     from ..simulator import Simulator
@@ -169,8 +174,15 @@ class PathFollower:
         self.steps: PathStepSpec = spec.arc_length.step if self.arc else spec.displacement.step
         self.psi2 = spec.arc_length.psi ** 2 if self.arc and spec.arc_length.kind == "spherical" else 0.0
         self.loads = PathLoads(model, self.ws)
-        self.lu = TangentLU(model)            # factors, solves and counts negative pivots
+        self.lu = TangentLU(model)            # factors, solves and counts negative pivots at each point
         self.w = position_mask(model)
+        # the corrector runs in one numba call (path_step.py) on the static Newton's packs and LU
+        self._packs, self._sky = sim._static.fast.packs, sim._static.lu.skyline
+        self._wmask = np.ascontiguousarray(self.w[:model.nfree], dtype=np.float64)
+        self._rm = np.zeros(model.ndof)
+        self._d_t = np.zeros(model.nsys)
+        self._dx_start = np.zeros(model.nsys)
+        self._io = np.zeros(N_PO)
         nf, n = model.nfree, model.nsys
         self._inv_scale = 1.0 / model.dof_scale[model.free]
         self.monitor = dof_index(model, spec.monitor) if spec.monitor is not None else -1
@@ -199,9 +211,6 @@ class PathFollower:
         self._nf = nf
 
     # -- system pieces ----------------------------------------------------------------------
-    def _x_get(self) -> np.ndarray:
-        return np.concatenate([self.state.q[self.model.free], self.state.mult])
-
     def _x_add(self, dx: np.ndarray) -> None:
         self.state.q[self.model.free] += dx[:self._nf]
         self.state.mult += dx[self._nf:]
@@ -244,23 +253,32 @@ class PathFollower:
 
     def _newton_fixed(self, lam: float) -> _Attempt:
         """Plain Newton at a fixed load factor (the start of the path)."""
-        tol, it, inc = self.spec.tolerance, 0, math.inf
-        with np.errstate(all="ignore"):        # divergence is detected below and reported
-            for it in range(1, self.spec.max_iterations + 1):
-                self._residual(lam, True)
-                if not np.all(np.isfinite(self._rf)):
-                    return _Attempt(False, it, inc, f"non-finite residual at iteration {it}")
-                try:
-                    self.lu.factor(self.ws.kdata)
-                except RuntimeError as exc:
-                    return _Attempt(False, it, inc, f"singular tangent at iteration {it} ({exc})")
-                dx = self.lu.solve(-self._rf)
-                self._x_add(dx)
-                inc = float(np.max(np.abs(dx[:self._nf]) * self._inv_scale, initial=0.0))
-                viol = float(np.abs(self._rf[self._nf:]).max(initial=0.0))
-                if inc <= tol and viol <= tol:
-                    return _Attempt(True, it, inc)
-        return _Attempt(False, it, inc, f"no convergence in {self.spec.max_iterations} iterations")
+        self._dx_start[:] = 0.0
+        return self._corrector(lam, 0.0, FIXED, self._dx_start)
+
+    def _corrector(self, lam: float, dl: float, control: int, dx_acc: np.ndarray) -> _Attempt:
+        """:func:`~.path_step.path_correct` from the state in hand at load factor ``lam``; the
+        attempt, with ``self.lam`` at its last iterate."""
+        st, ws, sky, loads, io = self.state, self.ws, self._sky, self.loads, self._io
+        cf, ci, wf, wi = self._packs.packs
+        lam_point = self.points[-1].lam if self.points else 0.0
+        code = path_correct(st.q, st.lam, st.mult, ws.f_ext, ws.r, sky._env, sky._inv_diag, sky._stats, self._wmask,
+                            dx_acc, loads.f_ref, loads._fol0, loads._cons0, self._rm, self._pt, self._d_t, lam, dl,
+                            self.psi2 * self._u1sq, lam_point, self._lam_scale, control, cf, ci, wf, wi,
+                            self._packs.lay, io)
+        self.lam = float(io[PO_LAM])
+        it, inc = int(io[PO_IT]), float(io[PO_INC])
+        if code == OK:
+            return _Attempt(True, it, inc)
+        why = {NON_FINITE_RESIDUAL: f"non-finite residual at iteration {it}",
+               NON_FINITE_INCREMENT: f"non-finite increment at iteration {it}",
+               SINGULAR: f"singular tangent at iteration {it} (a non-finite pivot, or a zero matrix)",
+               NO_RESPONSE: "the controlled displacement does not respond to the load",
+               NO_ROOT: f"no real root of the arc-length constraint (discriminant {io[PO_DISC]:.3g})"}.get(code)
+        if why is None:
+            why = (f"no convergence in {self.spec.max_iterations} iterations (increment {inc:.2e})"
+                   f"{singular_note(io[PO_OMEGA])}")
+        return _Attempt(False, it, inc, why)
 
     def _accept(self, att: _Attempt, ds: float) -> StepResult:
         """Book a converged state: tangent and its direction for the next predictor, pivots, point."""
@@ -369,65 +387,10 @@ class PathFollower:
         self._dx[:] = dlam * dt
         self._x_add(self._dx)
         self.lam += dlam
-        with np.errstate(all="ignore"):        # divergence is detected below and reported
-            return self._correct(dl)
+        return self._correct(dl)
 
     def _correct(self, dl: float) -> _Attempt:
-        tol, nf = self.spec.tolerance, self._nf
-        inc, it = math.inf, 0
-        for it in range(1, self.spec.max_iterations + 1):
-            self._residual(self.lam, True)
-            if not np.all(np.isfinite(self._rf)):
-                return _Attempt(False, it, inc, f"non-finite residual at iteration {it}")
-            try:
-                self.lu.factor(self.ws.kdata)
-            except RuntimeError as exc:
-                return _Attempt(False, it, inc, f"singular tangent at iteration {it} ({exc})")
-            d_r = self.lu.solve(-self._rf)
-            d_t = self._tangent_direction()
-            dlam, why = self._constraint(d_r, d_t, dl)
-            if why:
-                return _Attempt(False, it, inc, why)
-            dx = d_r + dlam * d_t
-            if not np.all(np.isfinite(dx)):
-                return _Attempt(False, it, inc, f"non-finite increment at iteration {it}")
-            self._x_add(dx)
-            self._dx += dx
-            self.lam += dlam
-            inc = float(np.max(np.abs(dx[:nf]) * self._inv_scale, initial=0.0))
-            viol = float(np.abs(self._rf[nf:]).max(initial=0.0))
-            lam_ref = max(abs(self.lam), self._lam_scale, 1e-300)
-            if inc <= tol and viol <= tol and abs(dlam) <= tol * lam_ref:
-                return _Attempt(True, it, inc)
-        return _Attempt(False, it, inc, f"no convergence in {self.spec.max_iterations} iterations "
-                                        f"(increment {inc:.2e})")
-
-    def _constraint(self, d_r: np.ndarray, d_t: np.ndarray, dl: float) -> tuple[float, str]:
-        """δλ of this iteration: the arc-length root closest to the previous increment, or the
-        displacement-control value; ``(0, reason)`` when there is none."""
-        if not self.arc:
-            j = self.control
-            if abs(d_t[j]) < 1e-300:
-                return 0.0, "the controlled displacement does not respond to the load"
-            return -d_r[j] / d_t[j], ""
-        c2 = self.psi2 * self._u1sq
-        dx, dlam = self._dx, self.lam - self.points[-1].lam
-        v = dx + d_r
-        a = self._wdot(d_t, d_t) + c2
-        b = 2.0 * (self._wdot(v, d_t) + c2 * dlam)
-        c = self._wdot(v, v) + c2 * dlam * dlam - dl * dl
-        disc = b * b - 4.0 * a * c
-        if not disc >= 0.0 or not a > 0.0:
-            return 0.0, f"no real root of the arc-length constraint (discriminant {disc:.3g})"
-        qr = -0.5 * (b + math.copysign(math.sqrt(disc), b))
-        roots = [qr / a] + ([c / qr] if qr != 0.0 else [])
-        base_dot = self._wdot(dx, v) + c2 * dlam * dlam
-        wdt = self._wdot(dx, d_t) + c2 * dlam
-
-        def alignment(r: float) -> float:      # Δx_old · Δx_new (+ load term): largest = smallest angle
-            return base_dot + r * wdt
-
-        return max(roots, key=alignment), ""
+        return self._corrector(self.lam, dl, ARC if self.arc else self.control, self._dx)
 
     # -- goals and the run ------------------------------------------------------------------
     def _check_goals(self) -> None:

@@ -10,6 +10,7 @@ import pytest
 import flexmb_core.integrators.energy as energy_mod
 import flexmb_core.integrators.fast as fast_mod
 import flexmb_core.integrators.packs as packs_mod
+import flexmb_core.integrators.path_step as path_step_mod
 import flexmb_core.kernels.constraints as constraints_mod
 import flexmb_core.kernels.frame3d as frame_mod
 import flexmb_core.kernels.guard as guard_mod
@@ -23,7 +24,7 @@ from flexmb_core.simulator import Simulator
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatter_mod, shell_mod, guard_mod,
-           fast_mod, packs_mod)
+           fast_mod, packs_mod, path_step_mod)
 
 
 def _kernels():
