@@ -70,8 +70,8 @@ STATIC_PIVOT = 2.0 ** -26
 # arm): 3e-17 to 2e-16 without any sweep, as SuperLU with partial pivoting gave on the same
 # matrices (4e-17 to 3e-16); a free spin link in statics (singular tangent, consistent residual)
 # 3.2e-13 after refinement. A singular matrix with a residual outside its range keeps
-# ω ≈ STATIC_PIVOT ≈ 1e-8 (tests/unit/test_banded_solver.py): the bound sits between, three
-# decades from each.
+# ω ≈ STATIC_PIVOT (7.5e-9 in tests/unit/test_banded_solver.py): the bound sits between, 30× above
+# the one and 750× below the other.
 BACKWARD_ERROR_TOL = 1.0e-11
 # GMRES(KRYLOV_DIM) with at most REFINE_CYCLES restarts refines a solve (:func:`_refine_kernel`);
 # it needs about one iteration more than the pivots replaced
@@ -788,8 +788,8 @@ def _refine_kernel(data, data2, coef, indptr, indices, b, x, perm, base, lrun_pt
 
     ``E`` has the rank ``k`` of the pivots replaced, so the preconditioned operator is the identity
     plus a rank-``k`` term and GMRES converges in about ``k + 1`` iterations where plain iterative
-    refinement (``x += M⁻¹(b − A x)``) may not converge at all: a zero pivot of a rigid corner's
-    free block (the vectors of two members that only the multipliers tie) makes ``‖M⁻¹E‖ ≈ 1``.
+    refinement (``x += M⁻¹(b − A x)``) may stall: on the off-plane hinge by multipliers
+    (``tests/verification/test_joints.py``) it stopped at ω = 4e-10.
     Arrays as in :func:`_solve_kernel`; ``res, corr`` (n,) scratch; ``basis (m + 1, n)``,
     ``hess (m + 1, m)``, ``rot (3, m + 1)`` the Krylov scratch of GMRES(m); at most
     :data:`REFINE_CYCLES` restarts. It stops as soon as the normwise backward error
