@@ -46,14 +46,12 @@ class TangentLU:
     Attributes
     ----------
     negative_pivots : int | None — of the last factorization.
-    refined : int — factorizations whose solves were refined.
     """
 
     def __init__(self, model: Model, *, min_pivot_ratio: float = 1e-10):
         n, nf = model.nsys, model.nfree
         self.min_pivot_ratio = min_pivot_ratio
         self.negative_pivots: int | None = None
-        self.refined = 0
         self._suspect = False
         self._matrix = np.zeros(model.nnz)        # the suspect factors' matrix (permuted), to refine against
         self._b = np.zeros(n)
@@ -87,7 +85,6 @@ class TangentLU:
         # with multipliers the last pivots are Schur complements −G K⁻¹ Gᵀ, small by their units
         self._suspect = replaced or (self._perm is None and self.lu.min_pivot_ratio < self.min_pivot_ratio)
         if self._suspect:
-            self.refined += 1
             if data is not self._matrix:
                 self._matrix[:] = data
 

@@ -41,7 +41,6 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..errors import ConvergenceError, SceneError
-from ..kernels.moments import conservative_moments, follower_moments
 from ..model.assembly import apply_drives, assemble
 from ..model.model import Model
 from ..scene.schema import DofComponent, PathStepSpec, Scene
@@ -51,7 +50,7 @@ from .energy import gravity_potential
 from .fast import NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, SINGULAR
 from .packs import singular_note
 from .path_step import (ARC, FIXED, N_PO, NO_RESPONSE, NO_ROOT, PO_DISC, PO_INC, PO_IT, PO_LAM, PO_OMEGA,
-                        path_correct)
+                        load_direction, path_correct)
 
 if TYPE_CHECKING:
     from ..simulator import Simulator
@@ -117,7 +116,8 @@ class PathLoads:
             f_ref += self._s0 @ model.load_vectors
         f_ref += model.gravity_signal.value * model.gravity_vector
         self.f_ref = f_ref                          # (ndof,) N, dead loads per unit λ
-        self._r_m = np.zeros(model.ndof)
+        self._p = np.zeros(model.ndof)
+        self._kdummy = np.zeros(0)
 
     def set(self, lam: float) -> None:
         ws = self.ws
@@ -127,18 +127,11 @@ class PathLoads:
         np.multiply(self.f_ref, lam, out=ws.f_ext)
 
     def direction(self, q: np.ndarray) -> np.ndarray:
-        """``p = −∂R/∂λ (ndof,)`` at ``q``: f_ref minus the moment loads' internal-force share per
-        unit λ (those are linear in their scale, so one evaluation at scale s⁰ is exact)."""
+        """``p = −∂R/∂λ (ndof,)`` at ``q`` (:func:`~.path_step.load_direction`, the corrector's own)."""
         m = self.model.moments
-        r = self._r_m
-        r[:] = 0.0
-        if m.follower_vdofs.shape[0]:
-            follower_moments(q, m.follower_vdofs, m.follower_mbody, self._fol0, m.follower_smap, False, r,
-                             self.ws.kdata)
-        if m.cons_vdofs.shape[0]:
-            conservative_moments(q, m.cons_vdofs, m.cons_axes, m.cons_magnitude, self._cons0, m.cons_smap,
-                                 False, r, self.ws.kdata)
-        return self.f_ref - r
+        load_direction(q, self.f_ref, self._fol0, self._cons0, m.follower_vdofs, m.follower_mbody, m.follower_smap,
+                       m.cons_vdofs, m.cons_axes, m.cons_magnitude, m.cons_smap, False, self._p, self._kdummy)
+        return self._p.copy()
 
 
 @dataclass

@@ -50,7 +50,7 @@ def path_correct(q, lam_act, mult, f_ext, r, env, inv_diag, lu_stats, wmask, dx_
     lu_stats`` the static solver's skyline factors; ``wmask (nfree,)`` 1.0 on the free nodal
     positions (the arc length's metric); ``dx_acc (nsys,)`` in/out the increment so far of the
     free DOFs and multipliers; ``f_ref (ndof,)`` the dead loads per unit λ; ``s_fol0, s_cons0``
-    the moment loads' scales per unit λ; ``rm (ndof,)``, ``pt, d_t (nsys,)`` scratch; ``lam`` the
+    the moment loads' scales per unit λ; ``rm (ndof,)``, ``pt, d_t (nsys,)`` scratch (``p`` of :func:`load_direction` in ``rm``); ``lam`` the
     load factor of the prediction; ``dl`` the increment's length (m); ``c2 = ψ² ‖u₁‖²`` the
     spherical arc length's load weight; ``lam_point`` the load factor of the last converged point;
     ``lam_scale`` the first increment's |Δλ| (the convergence test's scale for δλ); ``control``
@@ -115,18 +115,11 @@ def path_correct(q, lam_act, mult, f_ext, r, env, inv_diag, lu_stats, wmask, dx_
         io[PO_OMEGA] = max(io[PO_OMEGA], solve_packed(rf, d_r, env, inv_diag, lu_stats, wf, wi, lay, par))
         dlam = 0.0
         if control != FIXED:
-            # p = −∂R/∂λ: the dead loads minus the moment loads' internal-force share per unit λ
-            for i in range(rm.size):
-                rm[i] = 0.0
-            if f_vdofs.shape[0]:
-                follower_moments(q, f_vdofs, view2(cf, lay[L_FMBODY]), s_fol0, view2(ci, lay[L_FSMAP]), no_k, rm,
-                                 kdummy)
-            if m_vdofs.shape[0]:
-                conservative_moments(q, m_vdofs, view3(cf, lay[L_CAXES]), view1(cf, lay[L_CMAG]), s_cons0,
-                                     view2(ci, lay[L_MSMAP]), no_k, rm, kdummy)
+            load_direction(q, f_ref, s_fol0, s_cons0, f_vdofs, view2(cf, lay[L_FMBODY]), view2(ci, lay[L_FSMAP]),
+                           m_vdofs, view3(cf, lay[L_CAXES]), view1(cf, lay[L_CMAG]), view2(ci, lay[L_MSMAP]), no_k,
+                           rm, kdummy)
             for k in range(nf):
-                i = free[k]
-                pt[k] = f_ref[i] - rm[i]
+                pt[k] = rm[free[k]]
             for i in range(nmult):
                 pt[nf + i] = 0.0
             io[PO_OMEGA] = max(io[PO_OMEGA], solve_packed(pt, d_t, env, inv_diag, lu_stats, wf, wi, lay, par))
@@ -167,6 +160,24 @@ def path_correct(q, lam_act, mult, f_ext, r, env, inv_diag, lu_stats, wmask, dx_
     io[PO_INC] = inc
     io[PO_LAM] = lam
     return code
+
+
+@njit(cache=True, nogil=True)
+def load_direction(q, f_ref, s_fol0, s_cons0, f_vdofs, f_mbody, f_smap, m_vdofs, m_axes, m_mag, m_smap, no_k, p,
+                   kdummy):
+    """``p = −∂R/∂λ (ndof,)`` at ``q``, into ``p``: the dead loads per unit λ ``f_ref`` minus the
+    moment loads' internal-force share at their scales per unit λ ``s_fol0, s_cons0`` (the moment
+    kernels are linear in the scale, so one evaluation is exact). The follower and conservative
+    moments' arrays as in :mod:`flexmb_core.kernels.moments`; ``no_k`` False (no tangent),
+    ``kdummy`` their unused tangent argument."""
+    for i in range(p.size):
+        p[i] = 0.0
+    if f_vdofs.shape[0]:
+        follower_moments(q, f_vdofs, f_mbody, s_fol0, f_smap, no_k, p, kdummy)
+    if m_vdofs.shape[0]:
+        conservative_moments(q, m_vdofs, m_axes, m_mag, s_cons0, m_smap, no_k, p, kdummy)
+    for i in range(p.size):
+        p[i] = f_ref[i] - p[i]
 
 
 @njit(cache=True, nogil=True)

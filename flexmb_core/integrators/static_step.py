@@ -263,8 +263,6 @@ class NumbaStatic:
         if solver._predicted < 0.0 and io[SO_PRED] >= 0.0:     # the first increment of the load step
             solver._predicted = io[SO_PRED]
         strain, grav = io[SO_STRAIN], io[SO_GRAV]
-        if guard.enabled and code in (OK, RISE):
-            guard.last_rise, guard.last_size = io[SO_X], io[SO_Y]
         if code == OK:
             return StepResult(True, it, rel, inc, 1, 0.0, strain, grav)
         note = singular_note(io[SO_OMEGA])

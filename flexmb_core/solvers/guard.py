@@ -86,9 +86,6 @@ class StepGuard:
     Attributes
     ----------
     rejections : int — roots refused so far.
-    last_rise, last_size : float — ``Φ(q) − Φ(q_p)`` and the size of its terms at the last check (J).
-    last_gain, last_scale : float — energy gain beyond the work done, and the energy scale, at the
-        last balance check (J).
     """
 
     def __init__(self, model: Model, *, tolerance: float = 1e-9, rise_tolerance: float = 1e-2,
@@ -100,8 +97,6 @@ class StepGuard:
         self.balance_tolerance = balance_tolerance
         self.enabled = enabled
         self.rejections = 0
-        self.last_rise = self.last_size = 0.0
-        self.last_gain = self.last_scale = 0.0
         n = model.ndof
         self._stations = [self._frame_stations(model, g) for g in model.frame_groups]
         # Energy ledger of dynamics: the last accepted state (t, q, v), its K + U, its loads and
@@ -176,10 +171,8 @@ class StepGuard:
         """The reason of a refusal by :func:`~flexmb_core.kernels.guard.dynamic_guard` (code 1:
         ``x, y`` = rise and size of Φ; code 2: gain and scale of the balance)."""
         if code == 1:
-            self.last_rise, self.last_size = x, y
             return (f"step guard: spurious Newton root — the step's incremental potential rose by {x:.3g} J "
                     f"(strain energy {u_p:.4g} → {u_last:.4g} J); a physical root lowers it")
-        self.last_gain, self.last_scale = x, y
         return (f"step guard: spurious Newton root — kinetic + strain energy {self._e:.4g} → {e_end:.4g} J "
                 f"against {e_end - self._e - x:.3g} J of work done by loads and drives in the step")
 
