@@ -11,8 +11,9 @@ Three input forms, one per topic of the node (see :mod:`flexmb_io.topics`):
 
 A command stream is a sampled signal, not a staircase (``hold='ramp'``, the default). A new
 length is reached over one *observed command period* T — the median of the last intervals
-between commands on the same input, measured on the stamps when stamped and on arrival (the
-twin's time at acceptance) otherwise, bounded to [Δt, min(0.5 s, timeout)], Δt for the first
+between commands on the same input, measured on the stamps when stamped and on arrival otherwise
+(a live node's reception on the wall clock, mapped onto the twin's time; offline, the twin's time
+at acceptance), bounded to [Δt, min(0.5 s, timeout)], Δt for the first
 command:
 
 - lengths without rates: a first-order hold, the linear ramp from the length in force at
@@ -53,8 +54,10 @@ STALL_GRACE = 0.03           # s: a bare-length stream's line is followed this l
 # measured 3–4 kN leg force peaks on the Stewart twin at the end of a 0.3 m/s stream)
 TIMEOUT_STOP = 0.1
 _PERIOD_WINDOW = 8           # intervals in the median of the observed command period
-# most samples of a bare stream taken as lost between two arrivals (a later arrival is a stall)
-_MAX_LOST = 6
+# most samples of a bare stream taken as lost between two arrivals (a later arrival is a stall);
+# 16: a keep-last history of 10 overwritten while the executor stalled lost 9 and 15 in a row of a
+# 1 kHz stream in live runs
+_MAX_LOST = 16
 _EXCERPT = 6                 # values quoted in a rejection message
 _NAME_CHARS = 40             # characters of one name quoted in a rejection message
 
@@ -325,7 +328,8 @@ class _Period:
     jitter does not accumulate in a mean, where a median of quantized, jittered intervals is biased.
     Its spread (their range, the two shortest and longest left out) is 0 for a regular stream.
 
-    Arrival times (quantized to the twin's steps, delayed by the transport) are mapped onto a
+    Arrival times (delayed by the transport and the sender's jitter; offline, quantized to the
+    twin's steps) are mapped onto a
     regular sample clock: with the phase error ``e = a_k − (τ_k−1 + T̂)``, ``τ_k = τ_k−1 + T̂ + β e``
     (a phase-locked loop: the clock moves by a fraction of a µs per sample where the arrivals jitter
     by milliseconds — what the rate and acceleration estimates of the samples need). While the
@@ -347,14 +351,23 @@ class _Period:
     not falling by T̂/2 per arrival), or ``PAUSE`` s plus that bound once: the first late arrival
     after a stall of the sender or the transport is the head of a backlog that the next ones catch
     up (measured: a Python client that stalled 48 ms sent the 48 commands it owed back to back; a
-    restart there moves the targets by v × 48 ms)."""
+    restart there moves the targets by v × 48 ms).
+
+    The gains β and ``SMOOTH`` are per sample up to 100 Hz and per second above
+    (``BETA_PER_S``, ``SMOOTH_PER_S``: the same time constants, 2 s and 0.2 s, at any rate). Per
+    sample at 1 kHz, each arrival's jitter moved the clock ten times as often: with receptions
+    jittered by 0–0.3 ms, a 40 nm wobble of the commanded lengths that the steel legs turned into
+    ±8 N (177 N peaks against 160 N smooth; 162 N with the gains per second, 160 N with a frozen
+    clock)."""
 
     WINDOW = 32
     CLOCK_WINDOW = 64
     BETA = 0.005
+    BETA_PER_S = 0.5
     LATE_RUN = 3
     PAUSE = 0.1
     SMOOTH = 0.05
+    SMOOTH_PER_S = 5.0
     MIN_SLOPE = 3                   # arrivals on a clock before its step is their slope
 
     def __init__(self):
@@ -372,7 +385,7 @@ class _Period:
         self.T_hat = math.nan
 
     def observe(self, t: float, stamped: bool, floor: float,
-                gap_fits=None) -> tuple[float | None, float, float, float]:
+                gap_steps=None) -> tuple[float | None, float, float, float]:
         """(period or None for the first command, its spread, the sample time τ, the clock's step)
         of a command at ``t`` (its stamp, or its arrival); ``floor`` (s) is the smallest clock step.
 
@@ -380,10 +393,13 @@ class _Period:
         :data:`_MAX_LOST`) is either late or the k-th sample after the previous one, the ones
         between lost (a best-effort subscription, a keep-last history overwritten while the
         executor was busy: 9 % of a 1 kHz stream in live runs). Arrival times cannot tell the two
-        apart; ``gap_fits(k)`` — the values — decides: True when the new sample continues the
-        previous ones' motion k steps on better than one step on. Taken as lost, the clock moves
-        k periods (a late sample moved by one period made a lost one a step of twice the rate:
-        8.5 kN leg force peaks on the Stewart twin at 3 % loss, 160 N smooth)."""
+        apart; ``gap_steps(k)`` — the values — decides: the number of steps j ≤ k on from the
+        previous sample that the new one continues the previous ones' motion best (1: none fits
+        better than the next). Taken as lost, the clock moves j periods, and what the arrival is
+        later than that is lateness (a late sample moved by one period made a lost one a step of
+        twice the rate: 8.5 kN leg force peaks on the Stewart twin at 3 % loss, 160 N smooth; the
+        clock moved by the arrival's k periods, a sender that stalled and then lost part of its
+        backlog put the samples 5 ms ahead of their values: 45 m/s² command accelerations)."""
         prev = self.last[stamped]
         self.last[stamped] = t
         if math.isfinite(prev):
@@ -408,15 +424,16 @@ class _Period:
         if self.late >= self.LATE_RUN or e > bound + self.PAUSE:
             return est, spread, self._restart(t, est, floor), self.T_hat
         steps = 1                                # sample periods since the previous arrival
-        if gap_fits is not None and e > 0.5 * self.T_hat:
+        if gap_steps is not None and e > 0.5 * self.T_hat:
             steps = min(1 + int(round(e / self.T_hat)), 1 + _MAX_LOST)
-            if steps > 1 and gap_fits(steps):
+            steps = gap_steps(steps) if steps > 1 else 1
+            if steps > 1:
                 e -= (steps - 1) * self.T_hat      # on time for that sample
                 self.late = 0
                 self.e_prev = e
             else:
                 steps = 1
-        self.tau += steps * self.T_hat + self.BETA * e
+        self.tau += steps * self.T_hat + min(self.BETA, self.BETA_PER_S * self.T_hat) * e
         self.count += steps
         cw = self.CLOCK_WINDOW
         self.arrivals[self.run % cw] = t
@@ -431,7 +448,8 @@ class _Period:
         elif m >= self.MIN_SLOPE:
             slope = _arrival_slope(self.arrivals, self.counts, m, self.run - 1)
             # followed at a rate of SMOOTH per sample: its wobble would modulate every rate estimate
-            self.T_hat = max(self.T_hat + self.SMOOTH * (slope - self.T_hat), floor)
+            gain = min(self.SMOOTH, self.SMOOTH_PER_S * self.T_hat)
+            self.T_hat = max(self.T_hat + gain * (slope - self.T_hat), floor)
         return est, spread, self.tau, self.T_hat
 
     def _restart(self, t: float, est: float | None, floor: float) -> float:
@@ -614,8 +632,11 @@ class CommandSchedule:
         return r
 
     # -- inputs --------------------------------------------------------------------------------
-    def command_array(self, topic: str, values, now: float) -> Rejection | None:
-        """Lengths of every actuator in scene order (no stamp: they apply from ``now``)."""
+    def command_array(self, topic: str, values, now: float, arrival: float | None = None) -> Rejection | None:
+        """Lengths of every actuator in scene order (no stamp: they apply from ``now``).
+
+        ``arrival`` (s): the twin time the command arrived at, on the wall clock's mapping onto the
+        twin's (see :meth:`_period`); None: ``now``."""
         v = np.asarray(values, dtype=float).ravel()
         if v.size != len(self.names):
             return self._reject(Rejection(topic, SIZE, f"expected {len(self.names)} lengths "
@@ -623,11 +644,13 @@ class CommandSchedule:
         r = self._check_lengths(topic, self.names, v)
         if r is not None:
             return self._reject(r)
-        self._apply(topic, self._all, v, None, now, now, stamp=0.0)
+        self._apply(topic, self._all, v, None, now, now, stamp=0.0, arrival=arrival)
         return None
 
-    def command_named(self, topic: str, names, lengths, velocities, stamp: float, now: float) -> Rejection | None:
-        """Named lengths (m) with optional rates (m/s), stamped (0 → ``now``)."""
+    def command_named(self, topic: str, names, lengths, velocities, stamp: float, now: float,
+                      arrival: float | None = None) -> Rejection | None:
+        """Named lengths (m) with optional rates (m/s), stamped (0 → ``now``; ``arrival`` as in
+        :meth:`command_array`)."""
         names = list(names)
         lengths = np.asarray(lengths, dtype=float).ravel()
         vel = None if velocities is None or len(velocities) == 0 else np.asarray(velocities, dtype=float).ravel()
@@ -646,7 +669,7 @@ class CommandSchedule:
             r = self._check_rates(topic, names, vel, idx)
         if r is not None:
             return self._reject(r)
-        self._apply(topic, idx, lengths, vel, stamp if stamp > 0 else now, now, stamp=stamp)
+        self._apply(topic, idx, lengths, vel, stamp if stamp > 0 else now, now, stamp=stamp, arrival=arrival)
         return None
 
     def command_trajectory(self, topic: str, names, stamp: float, points, now: float) -> Rejection | None:
@@ -755,12 +778,21 @@ class CommandSchedule:
             if self.trajectory is not None:
                 self.trajectory = None
 
-    def _period(self, topic: str, stamp: float, now: float, idx=None, lengths=None) -> tuple[float, float]:
-        """(hold duration T, sample time τ) of a command on ``topic`` accepted at ``now``; ``idx,
-        lengths``: its actuators and lengths, which tell a lost sample from a late one."""
-        fits = (lambda k: self._continues(idx, lengths, k)) if stamp <= 0 and idx is not None else None
-        est, spread, tau, grid = self._periods.setdefault(topic, _Period()).observe(
-            stamp if stamp > 0 else now, stamp > 0, self.dt, fits)
+    def _period(self, topic: str, stamp: float, now: float, arrival: float | None, idx=None,
+                lengths=None) -> tuple[float, float]:
+        """(hold duration T, sample time τ) of a command on ``topic`` accepted at ``now`` that
+        arrived at twin time ``arrival`` (None: ``now``); ``idx, lengths``: its actuators and
+        lengths, which tell a lost sample from a late one.
+
+        A live node passes the wall clock's arrival mapped onto the twin's time (the twin time whose
+        deadline that wall time is), not the twin's time at acceptance: that one is quantized to
+        steps and stands still while the stepping thread is late, so a late step made samples that
+        came 1 ms apart look simultaneous and then 2–3 ms apart (1 kHz bare streams: 0.4–5.5 kN leg
+        force peaks against 136 N smooth)."""
+        fits = (lambda k: self._lost_steps(idx, lengths, k)) if stamp <= 0 and idx is not None else None
+        period = self._periods.setdefault(topic, _Period())
+        est, spread, tau, grid = period.observe(stamp if stamp > 0 else (now if arrival is None else arrival),
+                                                stamp > 0, self.dt, fits)
         self._grid = grid
         # a cubic hold lasts the period plus four times the spread of the intervals: corrections of a
         # jittery stream (a late or early sample moves the target by v × jitter) are spread over
@@ -771,38 +803,44 @@ class CommandSchedule:
         # the time the next step evaluates, which makes one command per step the plain step hold
         return (self.dt if T <= self.dt * (1.0 + 1e-6) else T), tau
 
-    def _continues(self, idx, lengths, k: int) -> bool:
-        """Whether the unstamped ``lengths`` of actuators ``idx`` continue the line through each
-        one's previous two samples better ``k`` grid steps on than one step on (summed over the
-        actuators with two such samples; False without any, or with no motion)."""
+    def _lost_steps(self, idx, lengths, k: int) -> int:
+        """The grid steps j ∈ [1, k] from each actuator's previous sample to the unstamped ``lengths``
+        of actuators ``idx`` that continue the line through its previous two samples best (the
+        deviations summed over the actuators with two such samples); 1 without any, or with no
+        motion."""
         grid = self._grid
-        one = far = 0.0
+        cost = np.zeros(k)
+        js = np.arange(1, k + 1) * grid
         for j, i in enumerate(idx):
             if self.hist_n[i] < 2 or self.hist_stamped[i]:
                 continue
             h2 = _grid_steps(self.hist_t[i, 0] - self.hist_t[i, 1], grid)
             slope = (self.hist_L[i, 0] - self.hist_L[i, 1]) / h2
-            step = lengths[j] - self.hist_L[i, 0]
-            one += abs(step - slope * grid)
-            far += abs(step - slope * k * grid)
-        return far < one
+            cost += np.abs(lengths[j] - self.hist_L[i, 0] - slope * js)
+        best = int(np.argmin(cost))
+        return 1 + best if cost[best] < cost[0] else 1
 
-    def _predict(self, idx, lengths, tau: float, stamped: bool, T: float, t1: float) -> None:
+    def _predict(self, idx, lengths, tau: float, stamped: bool, T: float, t1: float, on_wall: bool = False) -> None:
         """Length and rate at ``t1`` of the parabola through the new samples ``lengths`` (at ``τ``) and
         the previous two of each actuator (a line with one, a constant with none usable), into
         ``base[idx]`` and ``rate[idx]``; the history is usable when on the same clock and at most
         2.5 T apart. Unstamped samples are taken as regular: differences on the grid step, not on the
         de-jittered clock (whose small corrections the differences would amplify). A sample is
         reached one period after its sample time, as a first-order hold reaches it: with one command
-        per step (T = Δt) the target is the sample itself, bit for bit."""
-        dt1 = 0.0 if T == self.dt else t1 - self._grid - tau
+        per step (T = Δt) and arrivals on the twin's own time the target is the sample itself, bit
+        for bit. With arrivals on the wall clock (``on_wall``) it is always the parabola one period
+        before ``t1``: a command applied a step later or earlier than its arrival (a backlog taken in
+        one go, a step a command ran ahead of the clock) then still gets its sample clock's value
+        at ``t1``, where the sample itself made every such step a jump of one sample (1 kHz bare
+        streams: 40 m/s² command accelerations against 0.3 m/s² in the law)."""
+        dt1 = 0.0 if T == self.dt and not on_wall else t1 - self._grid - tau
         _predict_lines(np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(lengths, dtype=np.float64),
                        float(tau), bool(stamped), float(self._grid), float(T), float(dt1), self.hist_L, self.hist_t,
                        self.hist_n, self.hist_stamped, self.base, self.rate, self.acc)
 
-    def _apply(self, topic, idx, lengths, rates, t_ref, now, stamp) -> None:
+    def _apply(self, topic, idx, lengths, rates, t_ref, now, stamp, arrival: float | None = None) -> None:
         if self.hold != "step":
-            T, tau = self._period(topic, stamp, now, idx, lengths)
+            T, tau = self._period(topic, stamp, now, arrival, idx, lengths)
             cur, vcur = self._in_force(now)
         else:
             T, vcur = 0.0, None
@@ -818,7 +856,7 @@ class CommandSchedule:
             self.t_ref[idx] = t_ref
         elif self.hold == "smooth":           # the predicted line, reached at the segment's end
             t1 = now + T
-            self._predict(idx, lengths, tau, stamp > 0, T, t1)
+            self._predict(idx, lengths, tau, stamp > 0, T, t1, arrival is not None)
             self.t_ref[idx] = t1
             # the parabola carries the line over up to _MAX_LOST lost samples, then it goes straight on
             self.acc_end[idx] = t1 + min(_MAX_LOST * self._grid, STALL_GRACE)

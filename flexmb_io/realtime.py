@@ -277,7 +277,7 @@ class Stepper:
         self.cfg = config
         self.dt = runner.dt
         self._notify = notify
-        # ("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag) | ("out", slot, seq) |
+        # ("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag, arrival) | ("out", slot, seq) |
         # ("clock", t), in the order things happened (appended under the lock)
         self.outbox: collections.deque = collections.deque()
         self._lock = threading.Lock()         # a command application and a step exclude each other
@@ -402,14 +402,15 @@ class Stepper:
                 rejections[PUBLISHER_STALLED] = rejections.get(PUBLISHER_STALLED, 0) + 1
                 return None
             t_applied = self.runner.t
+            arrival = self._arrival(recv_wall, t_applied)
             try:
-                rejection = apply_message(self.runner, kind, topic, msg)
+                rejection = apply_message(self.runner, kind, topic, msg, arrival)
             except Exception as exc:            # a message the checks did not foresee: rejected whole
                 rejection = f"{topic}: rejected: {type(exc).__name__}: {str(exc)[:200]}"
             if rejection is None:
                 self._new_command = True
                 self._cmd_recv_wall = recv_wall
-            self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag))
+            self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag, arrival))
             if self._held:                      # applied; no step owed (~/step takes them)
                 self._notify()
                 return None
@@ -421,6 +422,20 @@ class Stepper:
         if snap is None:
             self.wake.set()      # the stepping thread steps for it and wakes the publisher when due
         return snap
+
+    def _arrival(self, recv_wall: float, t_applied: float) -> float | None:
+        """The twin time of a command received at ``recv_wall`` (perf_counter, s): the time whose
+        deadline that wall time is, ``t + recv_wall − (t0 + nΔt)``, rounded to the ns that the
+        recording keeps (its publish time) so that a replay applies the very same float; None
+        (the twin's time, ``t_applied``) when not paced by the wall clock or when it rounds to the
+        command's log time. Under the lock.
+
+        A bare command's sample clock runs on these times (:meth:`CommandSchedule._period`): the
+        twin's own time at acceptance stands still while the stepping thread is late."""
+        if self.cfg.mode != "realtime" or not self._running or self._held:
+            return None
+        ns = max(0, round((t_applied + recv_wall - (self._t0 + self._n * self.dt)) * 1e9))
+        return None if ns == round(t_applied * 1e9) else ns * 1e-9
 
     @property
     def alive(self) -> bool:

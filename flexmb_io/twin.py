@@ -192,17 +192,21 @@ class TwinRunner:
             raise FlexmbError(f"{topic}: this twin takes no external commands ({why})")
         return self.schedule
 
-    def command_array(self, topic: str, values) -> Rejection | None:
-        return self._count(self._need_schedule(topic).command_array(topic, values, self.t))
+    def command_array(self, topic: str, values, arrival: float | None = None) -> Rejection | None:
+        """Lengths in scene order, applied now; ``arrival`` (s): the twin time the command arrived
+        at on the wall clock (:meth:`flexmb_io.commands.CommandSchedule.command_array`), None: now."""
+        return self._count(self._need_schedule(topic).command_array(topic, values, self.t, arrival))
 
-    def command_named(self, topic: str, names, lengths, velocities=None, stamp: float = 0.0) -> Rejection | None:
-        return self._count(self._need_schedule(topic).command_named(topic, names, lengths, velocities, stamp, self.t))
+    def command_named(self, topic: str, names, lengths, velocities=None, stamp: float = 0.0,
+                      arrival: float | None = None) -> Rejection | None:
+        return self._count(self._need_schedule(topic).command_named(topic, names, lengths, velocities, stamp, self.t,
+                                                                    arrival))
 
     def command_trajectory(self, topic: str, names, stamp: float, points) -> Rejection | None:
         return self._count(self._need_schedule(topic).command_trajectory(topic, names, stamp, points, self.t))
 
     def command_joint_state(self, topic: str, names, positions, velocities, efforts,
-                            stamp: float = 0.0) -> Rejection | None:
+                            stamp: float = 0.0, arrival: float | None = None) -> Rejection | None:
         """A ``sensor_msgs/JointState`` command (the ``topic_based_ros2_control`` convention):
         ``names`` some actuators in any order, ``positions (k,)`` their lengths (m), ``velocities``
         empty or ``(k,)`` rates (m/s); efforts must be empty (the actuators are length-controlled)."""
@@ -215,7 +219,7 @@ class TwinRunner:
             return self._count(schedule._reject(Rejection(
                 topic, SIZE, f"{len(names)} names but no position; the twin's actuators take position (length, m) "
                 "commands — a velocity-only command is not supported")))
-        return self.command_named(topic, names, positions, velocities, stamp)
+        return self.command_named(topic, names, positions, velocities, stamp, arrival)
 
     @property
     def rejected_commands(self) -> int:
@@ -309,21 +313,24 @@ class TwinRunner:
         return s
 
 
-def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejection | None:
+def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg,
+                  arrival: float | None = None) -> Rejection | None:
     """Feed one decoded command message (rclpy or :mod:`flexmb_io.wire` message, or dict) to the runner.
 
     ``topic_kind`` is ``commands`` (Float64MultiArray), ``actuator_commands`` (ActuatorCommand),
     ``joint_trajectory`` (JointTrajectory) or ``joint_commands`` (JointState: the stamp counts only
     with the runner option ``joint_command_stamps``, else the command applies on arrival).
+    ``arrival`` (s): the twin time an unstamped command arrived at on the wall clock (a realtime
+    node's mapping, recorded as the command's publish time); None: the runner's time.
     """
     def get(m, k):                # dicts, rclpy messages and flexmb_io.wire messages, mixed at any level
         return m[k] if isinstance(m, dict) else getattr(m, k)
     if topic_kind == "commands":
-        return runner.command_array(topic, list(get(msg, "data")))
+        return runner.command_array(topic, list(get(msg, "data")), arrival)
     if topic_kind == "actuator_commands":
         st = get(get(msg, "header"), "stamp")
         return runner.command_named(topic, list(get(msg, "names")), list(get(msg, "lengths")),
-                                    list(get(msg, "velocities")), stamp_seconds(st))
+                                    list(get(msg, "velocities")), stamp_seconds(st), arrival)
     if topic_kind == "joint_trajectory":
         st = get(get(msg, "header"), "stamp")
         raw = get(msg, "points")
@@ -336,5 +343,5 @@ def apply_message(runner: TwinRunner, topic_kind: str, topic: str, msg) -> Rejec
     if topic_kind == "joint_commands":
         stamp = stamp_seconds(get(get(msg, "header"), "stamp")) if runner.options.joint_command_stamps else 0.0
         return runner.command_joint_state(topic, list(get(msg, "name")), list(get(msg, "position")),
-                                          list(get(msg, "velocity")), list(get(msg, "effort")), stamp)
+                                          list(get(msg, "velocity")), list(get(msg, "effort")), stamp, arrival)
     raise ValueError(f"unknown command topic kind {topic_kind!r}")

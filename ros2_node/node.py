@@ -56,7 +56,7 @@ from flexmb_io.wire import serialize
 from .convert import message_class, to_dict
 from .logsink import DeferredLogger
 from .params import SPECS, NodeParams
-from .taking import TAKE_MAX, take_waiting
+from .taking import TAKE_MAX, take_waiting_received
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
 _SWITCH_INTERVAL = 5.0e-5
@@ -277,10 +277,12 @@ class TwinNode:
             self._diag = Diagnostics(self.node, out_qos, self.fq_name.lstrip("/"))
         if self.runner.schedule is not None:
             for topic, kind in _INPUTS:
-                cb = (lambda msg, _t=topic, _k=kind: self._on_message(_t, _k, msg))
+                box: list = []           # the subscription, for its callback (created with it)
+                cb = (lambda msg, _t=topic, _k=kind, _b=box: self._on_message(_t, _k, msg, _b[0]))
                 lost = SubscriptionEventCallbacks(message_lost=lambda ev, _t=topic: self._on_lost(_t, ev))
                 sub = self.node.create_subscription(message_class(topic.type), topic.name, cb, in_qos,
                                                     qos_overriding_options=overriding, event_callbacks=lost)
+                box.append(sub)
                 self._subs.append(sub)
                 self._command_subs.append((topic, kind, sub))
                 self._names[topic.name] = sub.topic_name
@@ -438,19 +440,32 @@ class TwinNode:
             self._warned[key] = now
             self.log.warning(text)
 
-    def _on_message(self, topic: T.Topic, kind: str, msg) -> None:
-        """A command subscription's callback: applied at once, or filed while _take_commands spins."""
+    def _on_message(self, topic: T.Topic, kind: str, msg, sub) -> None:
+        """A command subscription's callback: applied at once, or filed while _take_commands spins.
+
+        The executor hands over a message without the time DDS received it (rclpy 9.1.2's
+        ``EventsExecutor`` fails on callbacks that take the message info: "SystemError: null
+        argument to internal routine"), so its arrival is the callback's time — unless more
+        commands wait in its history: then the executor was late, the message came before the
+        first of them, and all are filed with their receptions for :meth:`_take_commands` (after
+        this spin), the first at the earliest of the callback's time and the next one's reception."""
         t_recv = time.perf_counter()
         if self._draining:
             self._inbox.append((topic, kind, msg, t_recv))
             return
         self._took = True
+        waiting = take_waiting_received(sub, TAKE_MAX) if DRAIN_HISTORIES else ()
+        if waiting:
+            self._inbox.append((topic, kind, msg, min(t_recv, waiting[0][1])))
+            self._inbox.extend((topic, kind, m, t) for m, t in waiting)
+            return
         self._on_command(topic, kind, msg, t_recv)
 
     def _take_commands(self) -> None:
-        """After a spin applied a command (executor thread): every command subscription's history
-        is taken empty here (at most ``TAKE_MAX`` messages each) and the commands are applied in
-        order of arrival per topic. When more than one was waiting — a backlog, the sign of an
+        """After a spin applied or filed a command (executor thread): every command subscription's
+        history is taken empty here (at most ``TAKE_MAX`` messages each, with their receptions:
+        :func:`~ros2_node.taking.take_waiting_received`) and the commands are applied in order of
+        arrival per topic. When more than one was waiting — a backlog, the sign of an
         executor slower than its commands — one non-blocking spin first runs the executor's queue:
         its entries for the messages just taken, or overwritten, now find nothing and are dropped (a
         command that arrived meanwhile is filed after them). Without this an overloaded executor
@@ -462,8 +477,7 @@ class TwinNode:
         self._took = False
         inbox = self._inbox
         for topic, kind, sub in self._command_subs:
-            for msg in take_waiting(sub, TAKE_MAX):
-                inbox.append((topic, kind, msg, time.perf_counter()))
+            inbox.extend((topic, kind, m, t) for m, t in take_waiting_received(sub, TAKE_MAX))
         if not inbox:
             return               # the histories were empty: the next spin drops any stale entry
         if len(inbox) > 1:       # a backlog: drop the executor's stale entries before applying
@@ -575,11 +589,12 @@ class TwinNode:
                               message=outcome_message or self._behind_message)
 
     def _on_command_event(self, topic_name: str, kind: str, d, t_applied: float, rejection,
-                          recv_wall: float, topic: T.Topic) -> None:
+                          recv_wall: float, topic: T.Topic, arrival: float | None) -> None:
         """A command applied at simulated time ``t_applied``: record it with that log time (what a
-        replay re-applies before the same step) and warn of a rejection."""
+        replay re-applies before the same step) and its arrival (twin time, see
+        :meth:`flexmb_io.realtime.Stepper._arrival`) as its publish time, and warn of a rejection."""
         if self.recorder is not None:
-            self.recorder.write(topic_name, topic.type, d, t_applied)
+            self.recorder.write(topic_name, topic.type, d, t_applied, arrival)
         if rejection is None:
             self._accepted_wall = max(self._accepted_wall, recv_wall)
         elif isinstance(rejection, str):

@@ -66,7 +66,7 @@ class Measurements:
     setup: TwinSetup
     overrides: tuple[str, ...]     # --override edits of the scene (before the fitted values)
     keys: tuple[str, ...]          # the fitted scene keys, in theta's order
-    commands: list                 # (log ns, topic, kind, plain-dict message)
+    commands: list                 # (log ns, topic, kind, plain-dict message, arrival s or None)
     channels: tuple[Channel, ...]
     last_ns: int
 
@@ -111,7 +111,7 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
         if stop is not None and m.log_time_ns > stop:
             break
         if m.topic in kinds:
-            commands.append((m.log_time_ns, m.topic, kinds[m.topic], obj_to_dict(m.decode())))
+            commands.append((m.log_time_ns, m.topic, kinds[m.topic], obj_to_dict(m.decode()), m.arrival))
         elif m.topic == act_topic:
             r = m.decode()
             add("actuators.length", m.log_time_ns, r.lengths, r.names)

@@ -43,7 +43,8 @@ def ns(t: float) -> int:
     return int(round(t * 1e9))
 
 
-def run_lockstep(runner, commands: list[tuple[int, str, str, Any]], *, last_ns: int, until: float | None,
+def run_lockstep(runner, commands: list[tuple[int, str, str, Any, float | None]], *, last_ns: int,
+                 until: float | None,
                  at: Callable[[int], bool]) -> LockstepResult:
     """Step ``runner`` (started) on ``commands`` until ``last_ns`` or ``until``.
 
@@ -52,8 +53,10 @@ def run_lockstep(runner, commands: list[tuple[int, str, str, Any]], *, last_ns: 
     runner : flexmb_io.twin.TwinRunner
         A started runner (its initial state is time ``runner.t``).
     commands
-        ``(log time ns, topic, topic kind, message)`` sorted by time (file order within one time);
-        the message is a decoded message or plain dicts.
+        ``(log time ns, topic, topic kind, message, arrival)`` sorted by time (file order within one
+        time); the message is a decoded message or plain dicts; ``arrival`` is
+        :attr:`flexmb_io.bag.reader.BagMessage.arrival` (a live node's wall-clock arrival, s of twin
+        time, or None).
     last_ns
         Stop once the twin's time reaches this (ns).
     until
@@ -72,9 +75,9 @@ def run_lockstep(runner, commands: list[tuple[int, str, str, Any]], *, last_ns: 
         t = runner.t
         t_ns = ns(t)
         while i < len(commands) and commands[i][0] <= t_ns:
-            _, topic, kind, msg = commands[i]
+            _, topic, kind, msg, arrival = commands[i]
             i += 1
-            r = apply_message(runner, kind, topic, msg)
+            r = apply_message(runner, kind, topic, msg, arrival)
             res.commands_applied += 1
             if r is not None:
                 res.commands_rejected += 1

@@ -39,8 +39,9 @@ def obj_to_dict(o):
 
 @dataclass
 class BagMessage:
-    """One message: topic, ROS type, log time (ns of simulated time), CDR bytes; ``decode()``
-    gives the message object (fields as attributes)."""
+    """One message: topic, ROS type, log time (ns of simulated time), CDR bytes, publish time (ns; a
+    live node's command: its arrival in twin time); ``decode()`` gives the message object (fields as
+    attributes)."""
 
     topic: str
     type: str
@@ -48,6 +49,14 @@ class BagMessage:
     data: bytes
     channel_id: int
     _decode: Any = field(repr=False, default=None)
+    publish_time_ns: int = -1
+
+    @property
+    def arrival(self) -> float | None:
+        """A command's arrival (s of twin time) when it was recorded apart from its log time, else
+        None (apply it at the twin's time): the ``arrival`` of :func:`flexmb_io.twin.apply_message`."""
+        p = self.publish_time_ns
+        return None if p < 0 or p == self.log_time_ns else p * 1e-9
 
     @property
     def t(self) -> float:
@@ -257,7 +266,7 @@ class BagReader:
             # the decoder is looked up when a message is decoded, so a channel that is not ROS 2
             # CDR fails (BagError) only for a caller that decodes it
             yield BagMessage(ch.topic, schema.name if schema else "", m.log_time, bytes(m.data), m.channel_id,
-                             lambda data, _c=m.channel_id: self._decoder(_c)(data))
+                             lambda data, _c=m.channel_id: self._decoder(_c)(data), m.publish_time)
 
     def counts(self) -> dict[str, int]:
         """Messages per topic."""
@@ -280,7 +289,7 @@ def recover(src, out_dir, *, chunk_seconds: float = 0.25,
             edit: Callable[[str, str, bytes], bytes] | None = None) -> BagReader:
     """Write a complete bag at ``out_dir`` from everything readable in ``src`` (a bag or ``.mcap``,
     possibly cut short): attachments, metadata records, schemas, channels and messages, with
-    their original log times and bytes. Returns the reader of ``src``.
+    their original log and publish times and bytes. Returns the reader of ``src``.
 
     ``edit(topic, type_name, cdr)`` may return other CDR bytes for a message (e.g. measurement
     noise added to the outputs of a synthetic recording); None copies every message as it is.
@@ -307,7 +316,8 @@ def recover(src, out_dir, *, chunk_seconds: float = 0.25,
             ch = chans.get(m.channel_id)
             if ch is not None:
                 data = bytes(m.data)
-                out.write_cdr(ch, data if edit is None else edit(ch.info.name, ch.info.type, data), m.log_time)
+                out.write_cdr(ch, data if edit is None else edit(ch.info.name, ch.info.type, data), m.log_time,
+                              m.publish_time)
     finally:
         out.close()
     return r

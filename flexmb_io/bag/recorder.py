@@ -160,7 +160,7 @@ class BagRecorder:
         self._channels[topic] = self._bag.channel(topic, type_name)
         serializer(type_name)
 
-    def write(self, topic: str, type_name: str, msg, t_sim: float) -> None:
+    def write(self, topic: str, type_name: str, msg, t_sim: float, t_arrival: float | None = None) -> None:
         """Record one message (serialized here; :meth:`write_cdr` records bytes already serialized).
 
         Parameters
@@ -174,6 +174,10 @@ class BagRecorder:
             nested dicts/lists with the ROS field names (missing fields are zero).
         t_sim
             Simulated time (s, ≥ 0): the message's log time and publish time, in ns.
+        t_arrival
+            A command's arrival in twin time (s, ≥ 0), when it differs from ``t_sim``: the publish
+            time instead (what :func:`flexmb_io.bag.lockstep.run_lockstep` passes back as
+            ``arrival``; :meth:`flexmb_io.realtime.Stepper._arrival`).
 
         Raises
         ------
@@ -183,17 +187,19 @@ class BagRecorder:
         """
         if isinstance(msg, dict):
             msg = make(type_name, msg)
-        self.write_cdr(topic, type_name, serializer(type_name)(msg), t_sim)
+        self.write_cdr(topic, type_name, serializer(type_name)(msg), t_sim, t_arrival)
 
-    def write_cdr(self, topic: str, type_name: str, data: bytes, t_sim: float) -> None:
+    def write_cdr(self, topic: str, type_name: str, data: bytes, t_sim: float, t_arrival: float | None = None) -> None:
         """Record one message given as its CDR bytes (:func:`flexmb_io.wire.serialize`: what the node
         published). Parameters and errors as :meth:`write`."""
         ch = self._channels.get(topic)
         if ch is None or ch.info.type != type_name:
             ch = self._channels[topic] = self._bag.channel(topic, type_name)
-        if not t_sim >= 0.0 or t_sim == float("inf"):
-            raise BagError(f"{topic}: message time must be finite and ≥ 0 s (simulated time), got {t_sim}")
-        self._bag.write_cdr(ch, data, int(round(t_sim * 1e9)))
+        for t in (t_sim, 0.0 if t_arrival is None else t_arrival):
+            if not t >= 0.0 or t == float("inf"):
+                raise BagError(f"{topic}: message time must be finite and ≥ 0 s (simulated time), got {t}")
+        log_ns = int(round(t_sim * 1e9))
+        self._bag.write_cdr(ch, data, log_ns, log_ns if t_arrival is None else int(round(t_arrival * 1e9)))
 
     def flush(self) -> None:
         """Close the open chunk and flush it to the OS now (also done every ``chunk_seconds``)."""

@@ -7,7 +7,9 @@ so ``--dt``/``--integrator`` given to the recorded run are honoured), the runner
 (:mod:`flexmb_io.twin`'s timing rule):
 
 1. before the step from ``t_n``, apply every recorded command (``~/commands``,
-   ``~/actuator_commands``, ``~/joint_trajectory``) logged at ≤ ``t_n`` (ns), in file order;
+   ``~/actuator_commands``, ``~/joint_trajectory``) logged at ≤ ``t_n`` (ns), in file order, with
+   its recorded arrival (a realtime node records an unstamped command's wall-clock arrival, mapped
+   to twin time, as the message's publish time: it sets the command's sample clock);
 2. step (an offline run's last step is shortened to land on its ``until``, as ``flexmb run`` does);
 3. compare every output recorded at the new time (same ns) with what the replay reports, field by
    field (:mod:`flexmb_io.bag.compare` lists the fields and the default tolerances).
@@ -308,11 +310,11 @@ def replay(bag, *, tolerances: list[str] | dict | None = None, scene_path: str |
     pose_index = {T.pose_topic(o.name, i).resolved(twin.node_name, twin.namespace): i
                   for i, o in enumerate(o for o in twin.scene.outputs if o.kind == "platform_pose")}
 
-    commands: list[tuple[int, str, str, Any]] = []
+    commands: list[tuple[int, str, str, Any, float | None]] = []
     outputs: dict[int, list[tuple[str, str, Any]]] = {}
     for m in reader.messages():
         if m.topic in kinds:
-            commands.append((m.log_time_ns, m.topic, kinds[m.topic], m.decode()))
+            commands.append((m.log_time_ns, m.topic, kinds[m.topic], m.decode(), m.arrival))
         elif m.type in _OUTPUT_TYPES:
             outputs.setdefault(m.log_time_ns, []).append((m.topic, m.type, m))
     if not outputs:

@@ -217,14 +217,15 @@ class BagWriter:
         self.info.topics.append(ch.info)
         return ch
 
-    def write_cdr(self, channel: Channel, data: bytes, log_time_ns: int) -> None:
-        """Append one CDR-encoded message on ``channel`` (log time = publish time = ``log_time_ns``,
-        ns ≥ 0)."""
+    def write_cdr(self, channel: Channel, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """Append one CDR-encoded message on ``channel`` at ``log_time_ns`` (ns ≥ 0); its publish
+        time is ``publish_time_ns``, by default the log time."""
         if self.closed:
             raise BagError(f"{self.path}: the recording is closed")
         channel.sequence += 1
         self._mcap.add_message(channel_id=channel.id, log_time=log_time_ns, data=data,
-                               publish_time=log_time_ns, sequence=channel.sequence)
+                               publish_time=log_time_ns if publish_time_ns is None else publish_time_ns,
+                               sequence=channel.sequence)
         channel.info.count += 1
         bag = self.info
         self.messages += 1

@@ -11,7 +11,7 @@ from flexmb_core.model.compile import compile_scene
 from flexmb_core.scene import load_scene
 from flexmb_io import messages as M
 from flexmb_io import topics as T
-from flexmb_io.bag.reader import BagReader
+from flexmb_io.bag.reader import BagReader, recover
 from flexmb_io.bag.recorder import BagRecorder
 from flexmb_io.bag.replay import replay
 from flexmb_io.twin import RunnerOptions, TwinRunner, apply_message
@@ -108,3 +108,59 @@ def test_replay_without_the_recorded_options_would_differ(tmp_path):
     rep = replay(tmp_path / "defaults")
     assert not rep.ok and rep.exit_code == 3
     assert any(f.field == "commanded_lengths" for f in rep.beyond())
+
+
+def _record_bare_stream(out, with_arrivals: bool) -> list[float]:
+    """A realtime node's recording of a 1 kHz bare stream: each command logged at the twin's time
+    it was applied at (here 0–3 steps after it arrived, in order) with its wall-clock arrival as
+    the publish time (``with_arrivals``; else none, as before arrivals were recorded). Returns the
+    arrivals (s)."""
+    scene = load_scene(ROOT / STEWART_BARS)
+    model = compile_scene(scene)
+    runner = TwinRunner(model, options=RunnerOptions())
+    runner.start()
+    rest = model.actuators.l0.copy()
+    n = "flexmb_twin"
+    settings = {"dt": runner.dt, "integrator": runner.sim.spec.integrator, "mode": "realtime", "node_name": n,
+                "runner_options": vars(runner.options), "source": "flexmb node"}
+    rec = BagRecorder(out, scene_path=str(ROOT / STEWART_BARS), scene_text=(ROOT / STEWART_BARS).read_text(),
+                      settings=settings)
+    rng = np.random.default_rng(4)
+    sent = np.arange(240) * 1e-3 + 0.002
+    arrival = np.round((sent + rng.uniform(0.0, 3e-4, sent.size)) * 1e9) * 1e-9
+    applied = np.fmax.accumulate(np.ceil(arrival / 1e-3) * 1e-3 + rng.integers(0, 4, sent.size) * 1e-3)
+    topic = T.COMMANDS.resolved(n)
+    k = 0
+    for step in range(250):
+        while k < sent.size and applied[k] <= runner.t + 1e-12:
+            d = {"data": list(rest + 0.02 * np.sin(8.0 * sent[k]) ** 2)}
+            a = float(arrival[k]) if with_arrivals else None
+            rec.write(topic, T.COMMANDS.type, d, runner.t, a)
+            assert apply_message(runner, "commands", topic, d, a) is None
+            k += 1
+        assert runner.step().advanced
+        s = runner.sample()
+        rec.write(T.ACTUATOR_STATES.resolved(n), T.ACTUATOR_STATES.type, M.actuator_state(s), s.t)
+    rec.close()
+    return list(arrival)
+
+
+def test_a_realtime_recordings_command_arrivals_replay_bit_for_bit(tmp_path):
+    """A realtime node records a bare command's arrival (its DDS reception mapped onto the twin's
+    time) as the message's publish time; ``flexmb replay`` applies it with it, bit for bit. The
+    arrivals matter: the same commands replayed without them (publish time = log time) differ."""
+    arrivals = _record_bare_stream(tmp_path / "rt", True)
+    msgs = list(BagReader(tmp_path / "rt").messages({T.COMMANDS.resolved()}))
+    assert [m.arrival for m in msgs] == [round(a * 1e9) * 1e-9 for a in arrivals]
+    assert all(m.publish_time_ns != m.log_time_ns for m in msgs)
+    recover(tmp_path / "rt", tmp_path / "copy")          # a bag rewritten keeps them
+    assert [m.arrival for m in BagReader(tmp_path / "copy").messages({T.COMMANDS.resolved()})] == \
+        [m.arrival for m in msgs]
+    rep = replay(tmp_path / "rt")
+    assert rep.ok and rep.fields and all(f.identical for f in rep.fields), rep.format()
+    assert rep.commands_applied == len(arrivals)
+    _record_bare_stream(tmp_path / "old", False)
+    assert all(m.arrival is None for m in BagReader(tmp_path / "old").messages({T.COMMANDS.resolved()}))
+    a = BagReader(tmp_path / "rt").messages({T.ACTUATOR_STATES.resolved()})
+    b = BagReader(tmp_path / "old").messages({T.ACTUATOR_STATES.resolved()})
+    assert any(x.data != y.data for x, y in zip(a, b))

@@ -79,7 +79,7 @@ def test_published_recorded_and_offline_bytes_are_equal(tmp_path, dds_env):
         recorded[(m.topic, _stamp_ns(m.type, m.data) if m.topic in {t.resolved() for t in DETERMINISTIC}
                   else m.log_time_ns)].add(m.data)
         if m.topic in kinds:
-            commands.append((m.log_time_ns, m.topic, kinds[m.topic], obj_to_dict(m.decode())))
+            commands.append((m.log_time_ns, m.topic, kinds[m.topic], obj_to_dict(m.decode()), m.arrival))
     assert len(commands) == STEPS
 
     # published == recorded, byte for byte (DDS pads a serialized sample to a multiple of 4 bytes)

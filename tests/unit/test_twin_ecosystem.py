@@ -163,6 +163,33 @@ def test_stepper_hold_step_n_and_reset_without_the_thread(stewart):
     assert st.outbox[-2][0] == "out" and st.outbox[-1] == ("clock", 0.0)
 
 
+def test_a_realtime_stepper_maps_a_commands_reception_onto_the_twins_time(stewart):
+    """A bare command's arrival is the twin time whose deadline its reception is: state n stands for
+    the wall time t0 + nΔt, so a reception 1.3 ms before that is the twin's t − 1.3 ms, whatever
+    step the twin is at (its own time stands still while the stepping thread is late). Rounded to
+    the ns the recording keeps; None where it is the twin's time, and in lockstep."""
+    import time
+
+    model, program = stewart
+    runner, st = _stepper(model, mode="realtime")
+    st.hold()
+    st.step_n(5)
+    st._held, st._running = False, True          # as the realtime loop has it (not started here)
+    st._t0 = time.perf_counter() + 10.0          # state 0's wall time far ahead: no step runs on submit
+    command = {"data": list(program.command_lengths(0.0))}
+    wall_5 = st._t0 + 5 * runner.dt
+    st.submit("/t", "commands", command, wall_5 - 1.3e-3)
+    ev = st.outbox[-1]
+    assert ev[0] == "cmd" and ev[4] == runner.t and ev[5] is None
+    assert ev[8] == round((runner.t - 1.3e-3) * 1e9) * 1e-9
+    assert runner.schedule._periods["/t"].last[False] == ev[8]       # the sample clock's arrival
+    st.submit("/t", "commands", command, wall_5)
+    assert st.outbox[-1][8] is None                                  # the twin's own time
+    _, lock = _stepper(model)
+    lock.submit("/t", "commands", command, wall_5 - 1.3e-3)
+    assert lock.outbox[-1][0] == "cmd" and lock.outbox[-1][8] is None
+
+
 def test_frames_prefix_the_platform_frames_only(stewart):
     from ros2_node.node import frame_prefix
     assert frame_prefix("auto", "/") == "" and frame_prefix("auto", "/robot1") == "robot1/"
