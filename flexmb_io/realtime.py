@@ -381,7 +381,7 @@ class Stepper:
         self.wake.set()
         self._thread.join(timeout)
 
-    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None) -> Snapshot | None:
+    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None, step: bool = True) -> Snapshot | None:
         """A command message arrived (any thread): validate and apply it at the twin's current
         time and queue its event (``tag`` comes back with it in :attr:`outbox`).
 
@@ -392,7 +392,10 @@ class Stepper:
         (it is queued as already answered: the publisher records it and publishes only what else
         is due; the caller wakes the publisher when ``snap.wake``, else the events wait for its next
         wake — a thread woken per command costs ~10–60 µs here, see :meth:`_step`). Otherwise (the
-        twin is ahead, or lockstep) the stepping thread is woken for it and None is returned."""
+        twin is ahead, or lockstep) the stepping thread is woken for it and None is returned.
+
+        ``step=False`` (realtime): applied and recorded only, no step owed — a backlog's older
+        commands, of which only the newest steps (lockstep owes a step for every command)."""
         snap = None
         with self._lock:
             if len(self.outbox) >= self.cfg.outbox_limit:
@@ -411,7 +414,7 @@ class Stepper:
                 self._new_command = True
                 self._cmd_recv_wall = recv_wall
             self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag, arrival))
-            if self._held:                      # applied; no step owed (~/step takes them)
+            if self._held or (not step and self.cfg.mode == "realtime"):   # applied; no step owed
                 self._notify()
                 return None
             self._pending += 1

@@ -190,6 +190,26 @@ def test_a_realtime_stepper_maps_a_commands_reception_onto_the_twins_time(stewar
     assert lock.outbox[-1][0] == "cmd" and lock.outbox[-1][8] is None
 
 
+def test_a_backlogs_older_commands_owe_no_step_in_realtime(stewart):
+    """``submit(step=False)``: a realtime twin applies and records a backlog's older command but
+    owes it no step (the node steps on the newest); in lockstep every command still owes one."""
+    import time
+
+    model, program = stewart
+    command = {"data": list(program.command_lengths(0.0))}
+    runner, st = _stepper(model, mode="realtime")
+    st._running = True
+    st._t0 = time.perf_counter() - 1.0            # far behind: a command would step at once
+    assert st.submit("/t", "commands", command, time.perf_counter(), step=False) is None
+    assert runner.schedule.accepted == 1 and runner.counters.steps == 0 and st._pending == 0
+    assert st.outbox[-1][0] == "cmd"
+    snap = st.submit("/t", "commands", command, time.perf_counter())
+    assert snap is not None and runner.counters.steps == 1        # the newest steps, on this thread
+    runner, lock = _stepper(model)
+    lock.submit("/t", "commands", command, 0.0, step=False)
+    assert lock._pending == 1
+
+
 def test_frames_prefix_the_platform_frames_only(stewart):
     from ros2_node.node import frame_prefix
     assert frame_prefix("auto", "/") == "" and frame_prefix("auto", "/robot1") == "robot1/"
