@@ -381,7 +381,7 @@ class Stepper:
         self.wake.set()
         self._thread.join(timeout)
 
-    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None, step: bool = True) -> Snapshot | None:
+    def submit(self, topic: str, kind: str, msg, recv_wall: float, tag=None, steps: int = 1) -> Snapshot | None:
         """A command message arrived (any thread): validate and apply it at the twin's current
         time and queue its event (``tag`` comes back with it in :attr:`outbox`).
 
@@ -394,8 +394,12 @@ class Stepper:
         wake — a thread woken per command costs ~10–60 µs here, see :meth:`_step`). Otherwise (the
         twin is ahead, or lockstep) the stepping thread is woken for it and None is returned.
 
-        ``step=False`` (realtime): applied and recorded only, no step owed — a backlog's older
-        commands, of which only the newest steps (lockstep owes a step for every command)."""
+        ``steps`` (realtime): the steps it may run here, as many as the wall clock allows (the last
+        one's snapshot answered); 0: applied and recorded only. A backlog taken in one go is applied
+        first and its newest command runs the steps of all (a step for each older command ran the
+        twin on targets extrapolated from samples up to tens of ms old; none made the twin fall
+        back on the idle steps, 22 → 304 missed deadlines in 21 500, 1 kHz stamped).
+        Lockstep owes one step per command whatever ``steps`` says."""
         snap = None
         with self._lock:
             if len(self.outbox) >= self.cfg.outbox_limit:
@@ -414,17 +418,32 @@ class Stepper:
                 self._new_command = True
                 self._cmd_recv_wall = recv_wall
             self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag, arrival))
-            if self._held or (not step and self.cfg.mode == "realtime"):   # applied; no step owed
+            realtime = self.cfg.mode == "realtime"
+            if self._held or (steps <= 0 and realtime):      # applied; no step owed
                 self._notify()
                 return None
             self._pending += 1
-            if (self.cfg.mode == "realtime" and self._running and not self._done()
-                    and time.perf_counter() >= self._t0 + (self._n + 1 - self._command_lead) * self.dt):
+            if realtime and self._running and self._may_step():
                 self._pending = 0
-                snap = self._step_paced(answered=True)
+                for i in range(steps):
+                    # the last step the clock allows answers (time only grows: a step allowed for
+                    # state n + 2 now is allowed once state n + 1 is done)
+                    final = i == steps - 1 or not self._may_step(ahead=1)
+                    if final:
+                        snap = self._step_paced(answered=True)
+                        break
+                    new, self._new_command = self._new_command, False   # the answer is the last state
+                    self._step_paced(answered=False)
+                    self._new_command = new
         if snap is None:
             self.wake.set()      # the stepping thread steps for it and wakes the publisher when due
         return snap
+
+    def _may_step(self, ahead: int = 0) -> bool:
+        """Whether a command may run the step to state n + 1 + ``ahead`` now (under the lock): the
+        twin is then at most the command lead ahead of the wall clock."""
+        return not self._done() and (time.perf_counter()
+                                     >= self._t0 + (self._n + 1 + ahead - self._command_lead) * self.dt)
 
     def _arrival(self, recv_wall: float, t_applied: float) -> float | None:
         """The twin time of a command received at ``recv_wall`` (perf_counter, s): the time whose

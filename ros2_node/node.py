@@ -447,8 +447,8 @@ class TwinNode:
         ``EventsExecutor`` fails on callbacks that take the message info: "SystemError: null
         argument to internal routine"), so its arrival is the callback's time — unless more
         commands wait in its history: then the executor was late, the message came before the
-        first of them (its arrival: the earlier of the two; applied without a step), and they are
-        filed with their receptions for :meth:`_take_commands`, after this spin."""
+        first of them, and all are filed with their receptions for :meth:`_take_commands` (after
+        this spin), the first at the earlier of the callback's time and the next one's reception."""
         t_recv = time.perf_counter()
         if self._draining:
             self._inbox.append((topic, kind, msg, t_recv))
@@ -456,9 +456,10 @@ class TwinNode:
         self._took = True
         waiting = take_waiting_received(sub, TAKE_MAX) if DRAIN_HISTORIES else ()
         if waiting:
-            t_recv = min(t_recv, waiting[0][1])
+            self._inbox.append((topic, kind, msg, min(t_recv, waiting[0][1])))
             self._inbox.extend((topic, kind, m, t) for m, t in waiting)
-        self._on_command(topic, kind, msg, t_recv, step=not waiting)   # a backlog steps on its newest
+            return
+        self._on_command(topic, kind, msg, t_recv)
 
     def _take_commands(self) -> None:
         """After a spin applied or filed a command (executor thread): every command subscription's
@@ -488,19 +489,19 @@ class TwinNode:
         self._apply_inbox()
 
     def _apply_inbox(self) -> None:
-        """The filed commands in order; in realtime only the last may run a step (and is answered):
-        a backlog's older commands are already late, and a step for each ran the twin on targets
-        extrapolated from a sample up to tens of ms old (1 kHz under load, see README "Bare
-        streams over real DDS")."""
+        """The filed commands in order, and then their steps (realtime: :meth:`Stepper.submit`'s
+        ``steps``, run by the newest): a backlog's older commands are already late, and a step
+        for each ran the twin on targets extrapolated from samples up to tens of ms old (1 kHz
+        under load, README "Bare streams over real DDS")."""
         inbox = self._inbox
         last = len(inbox) - 1
         try:
             for i, (topic, kind, msg, t_recv) in enumerate(inbox):
-                self._on_command(topic, kind, msg, t_recv, step=i == last)
+                self._on_command(topic, kind, msg, t_recv, steps=len(inbox) if i == last else 0)
         finally:
             inbox.clear()
 
-    def _on_command(self, topic: T.Topic, kind: str, msg, t_recv: float, step: bool = True) -> None:
+    def _on_command(self, topic: T.Topic, kind: str, msg, t_recv: float, steps: int = 1) -> None:
         if not self.active:
             self._warn("inactive", f"{self._names[topic.name]}: ignored: the node is inactive (lifecycle); "
                        "activate it to command the twin")
@@ -509,7 +510,7 @@ class TwinNode:
         self._last_command_wall = t_recv
         d = to_dict(msg) if self.recorder is not None else msg
         with self._answering:
-            snap = self.stepper.submit(self._names[topic.name], kind, d, t_recv, topic, step=step)
+            snap = self.stepper.submit(self._names[topic.name], kind, d, t_recv, topic, steps=steps)
             if snap is None or not snap.answered:
                 return
             self._answer(snap)

@@ -190,23 +190,32 @@ def test_a_realtime_stepper_maps_a_commands_reception_onto_the_twins_time(stewar
     assert lock.outbox[-1][0] == "cmd" and lock.outbox[-1][8] is None
 
 
-def test_a_backlogs_older_commands_owe_no_step_in_realtime(stewart):
-    """``submit(step=False)``: a realtime twin applies and records a backlog's older command but
-    owes it no step (the node steps on the newest); in lockstep every command still owes one."""
+def test_a_backlogs_newest_command_runs_the_steps_of_all_in_realtime(stewart, monkeypatch):
+    """``submit(steps=0)``: a realtime twin applies and records a backlog's older command but
+    runs no step for it; the newest runs the backlog's steps, as many as the wall clock allows
+    (the last one answered). In lockstep every command owes one step whatever ``steps`` says."""
     import time
 
     model, program = stewart
     command = {"data": list(program.command_lengths(0.0))}
     runner, st = _stepper(model, mode="realtime")
     st._running = True
-    st._t0 = time.perf_counter() - 1.0            # far behind: a command would step at once
-    assert st.submit("/t", "commands", command, time.perf_counter(), step=False) is None
+    st._t0 = time.perf_counter() - 1.0            # far behind the wall clock: steps run at once
+    assert st.submit("/t", "commands", command, time.perf_counter(), steps=0) is None
     assert runner.schedule.accepted == 1 and runner.counters.steps == 0 and st._pending == 0
     assert st.outbox[-1][0] == "cmd"
-    snap = st.submit("/t", "commands", command, time.perf_counter())
-    assert snap is not None and runner.counters.steps == 1        # the newest steps, on this thread
+    snap = st.submit("/t", "commands", command, time.perf_counter(), steps=3)
+    assert runner.counters.steps == 3 and snap is not None and snap.answered and snap.state.t == runner.t
+    import types
+
+    import flexmb_io.realtime as R
+    now = time.perf_counter()
+    monkeypatch.setattr(R, "time", types.SimpleNamespace(perf_counter=lambda: now))   # the clock stands
+    st._t0 = now - (st._n + 1.5 - st._command_lead) * runner.dt   # one more step allowed, then none
+    snap = st.submit("/t", "commands", command, now, steps=3)
+    assert runner.counters.steps == 4 and snap is not None and snap.answered
     runner, lock = _stepper(model)
-    lock.submit("/t", "commands", command, 0.0, step=False)
+    lock.submit("/t", "commands", command, 0.0, steps=0)
     assert lock._pending == 1
 
 
