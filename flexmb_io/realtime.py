@@ -426,6 +426,8 @@ class Stepper:
             if realtime and self._running and self._may_step():
                 self._pending = 0
                 for i in range(steps):
+                    if i and self._done():        # the duration ended within the backlog's steps
+                        break
                     # the last step the clock allows answers (time only grows: a step allowed for
                     # state n + 2 now is allowed once state n + 1 is done)
                     final = i == steps - 1 or not self._may_step(ahead=1)
