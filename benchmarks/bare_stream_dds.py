@@ -28,7 +28,6 @@ import random
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -44,7 +43,6 @@ import numpy as np  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from flexmb_io import messages as M  # noqa: E402
 from flexmb_io import topics as T  # noqa: E402
 from flexmb_io.bag.reader import BagReader  # noqa: E402
 from flexmb_io.twin import RunnerOptions, TwinRunner  # noqa: E402
@@ -68,7 +66,7 @@ def smooth_peak(model) -> float:
 def one_run(program: Simulator, rate: float, out: Path, load_node_core: bool) -> dict:
     """One node, one stream; the peak from the node's recording."""
     from dds_harness import NodeProcess, TwinClient
-    from ros2_node.convert import message_class, to_ros
+    from ros2_node.convert import message_class
 
     os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
     summary = out.with_suffix(".json")
@@ -81,29 +79,12 @@ def one_run(program: Simulator, rate: float, out: Path, load_node_core: bool) ->
     clock = {"t": None}
     client.node.create_subscription(message_class(T.CLOCK.type), T.CLOCK.resolved("flexmb_twin"),
                                     lambda m: clock.__setitem__("t", m.clock.sec + 1e-9 * m.clock.nanosec), 100)
-    late = []
+    late: list[float] = []
     try:
         client.wait_for_twin(node)
         client.spin_until(lambda: clock["t"] is not None, 30, "/clock", node)
         client.unsubscribe(T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE, T.SHAPE, T.DIAGNOSTICS)
-        to_ros(T.COMMANDS.type, M.float64_array(program.command_lengths(0.0)))     # warm, as the test
-        running = True
-
-        def spin():
-            while running:
-                client.executor.spin_once(timeout_sec=0.01)
-
-        spinner = threading.Thread(target=spin, daemon=True)
-        spinner.start()
-        w0 = time.perf_counter()
-        try:
-            for k in range(int(SPAN * rate)):
-                time.sleep(max(0.0, w0 + k / rate - time.perf_counter()))
-                late.append(time.perf_counter() - w0 - k / rate)
-                client.publish(T.COMMANDS, to_ros(T.COMMANDS.type, M.float64_array(program.command_lengths(k / rate))))
-        finally:
-            running = False
-            spinner.join()
+        late = client.stream_lengths(program.command_lengths, rate, SPAN)
         time.sleep(0.3)
     finally:
         client.close()

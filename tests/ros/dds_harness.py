@@ -97,6 +97,40 @@ class TwinClient:
     def statuses(self):
         return self.received[self.T.STATUS.name]
 
+    def stream_lengths(self, law, rate: float, span: float, on_tick=None) -> list[float]:
+        """Send ``law(t)`` (lengths in scene order) as bare ``Float64MultiArray`` commands on this
+        client's clock, at ``rate`` Hz for ``span`` s, as a controller samples its law at regular
+        ticks (what jitters is delivery). The client's callbacks run meanwhile in a thread of their
+        own, so that the sending loop keeps its ticks; ``on_tick()`` runs after each send. Returns
+        each sample's lateness against its tick (s)."""
+        import threading
+
+        from flexmb_io import messages as M
+        from ros2_node.convert import to_ros
+
+        T = self.T
+        to_ros(T.COMMANDS.type, M.float64_array(law(0.0)))       # warm: a first call loads compiled code
+        running = True
+
+        def spin():
+            while running:
+                self.executor.spin_once(timeout_sec=0.01)
+
+        spinner = threading.Thread(target=spin, daemon=True)
+        spinner.start()
+        late, w0 = [], time.perf_counter()
+        try:
+            for k in range(int(span * rate)):
+                time.sleep(max(0.0, w0 + k / rate - time.perf_counter()))
+                late.append(time.perf_counter() - w0 - k / rate)
+                self.publish(T.COMMANDS, to_ros(T.COMMANDS.type, M.float64_array(law(k / rate))))
+                if on_tick is not None:
+                    on_tick()
+        finally:
+            running = False
+            spinner.join()
+        return late
+
     def publish(self, topic, msg) -> None:
         self.pub[topic.name].publish(msg)
 

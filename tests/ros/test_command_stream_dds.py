@@ -26,9 +26,7 @@ from dds_harness import ROOT, NodeProcess, TwinClient  # noqa: E402
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
-from flexmb_io import messages as M  # noqa: E402
 from flexmb_io import topics as T  # noqa: E402
-from ros2_node.convert import to_ros  # noqa: E402
 from flexmb_io.twin import RunnerOptions, TwinRunner  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -86,30 +84,9 @@ def test_bare_length_stream_gives_the_smooth_peak_force(tmp_path, dds_env, law, 
         # message are evaluated once before the first tick (their first call loads compiled code:
         # 130–370 ms measured, after which the loop sent the samples it owed back to back)
         client.unsubscribe(T.JOINT_STATES, T.STATUS, T.PLATFORM_POSE, T.SHAPE, T.DIAGNOSTICS)
-        to_ros(T.COMMANDS.type, M.float64_array(program.command_lengths(0.0)))
         t0 = clock["t"]
-        # a controller samples its law on its own clock, at regular ticks; what jitters is delivery.
-        # The client's callbacks run in a thread of their own so that the sending loop keeps its ticks.
-        import threading
-        running = True
-
-        def spin():
-            while running:
-                client.executor.spin_once(timeout_sec=0.01)
-
-        spinner = threading.Thread(target=spin, daemon=True)
-        spinner.start()
-        sent, late, w0 = [], [], time.perf_counter()
-        try:
-            for k in range(int(SPAN * rate)):
-                time.sleep(max(0.0, w0 + k / rate - time.perf_counter()))
-                late.append(time.perf_counter() - w0 - k / rate)
-                client.publish(T.COMMANDS, to_ros(T.COMMANDS.type,
-                                                  M.float64_array(program.command_lengths(k / rate))))
-                sent.append(clock["t"])
-        finally:
-            running = False
-            spinner.join()
+        sent: list[float] = []
+        late = client.stream_lengths(program.command_lengths, rate, SPAN, lambda: sent.append(clock["t"]))
         t_last = sent[-1]
         client.spin_until(lambda: any(_stamp(m) > t_last + 0.05 for m in client.received[T.ACTUATOR_STATES.name]),
                           30, "the states after the stream", node)
