@@ -45,22 +45,10 @@ from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
 from flexmb_io import topics as T  # noqa: E402
 from flexmb_io.bag.reader import BagReader  # noqa: E402
-from flexmb_io.twin import RunnerOptions, TwinRunner  # noqa: E402
 
 DOCS = ROOT / "docs" / "benchmarks"
 SCENE = "scenes/stewart_platform_bars.yaml"
 SPAN = 2.0          # s of the law streamed, as the test
-
-
-def smooth_peak(model) -> float:
-    """Peak |leg force| (N) of the scene's own commands over the streamed span."""
-    runner = TwinRunner(model, options=RunnerOptions(command_source="scene"))
-    runner.start(warmup=False)
-    peak = 0.0
-    while runner.t < SPAN - 1e-9:
-        runner.step()
-        peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
-    return peak
 
 
 def one_run(program: Simulator, rate: float, out: Path, load_node_core: bool) -> dict:
@@ -111,7 +99,8 @@ def main(argv=None) -> int:
     runs = args.runs * len(args.rates) if len(args.runs) == 1 else args.runs
     model = compile_scene(load_scene(str(ROOT / SCENE)))
     program = Simulator(model)
-    smooth = smooth_peak(model)
+    from dds_harness import smooth_peak_force
+    smooth = smooth_peak_force(model, SPAN)
     busy = None
     if args.load_node_core:
         os.sched_setaffinity(0, {0})

@@ -41,6 +41,22 @@ class NodeProcess:
         return self.proc.returncode
 
 
+def smooth_peak_force(model, span: float) -> float:
+    """Peak |leg force| (N) of ``model`` run offline on its scene's own commands over [0, ``span``] s:
+    the reference a command stream's peak is compared with."""
+    import numpy as np
+
+    from flexmb_io.twin import RunnerOptions, TwinRunner
+
+    runner = TwinRunner(model, options=RunnerOptions(command_source="scene"))
+    runner.start(warmup=False)
+    peak = 0.0
+    while runner.t < span - 1e-9:
+        runner.step()
+        peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
+    return peak
+
+
 class TwinClient:
     """A client node: publishes commands to the twin, collects what it publishes."""
 

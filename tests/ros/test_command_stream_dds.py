@@ -21,13 +21,12 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("flexmb_msgs.msg")
 
-from dds_harness import ROOT, NodeProcess, TwinClient  # noqa: E402
+from dds_harness import ROOT, NodeProcess, TwinClient, smooth_peak_force  # noqa: E402
 
 from flexmb_core.model.compile import compile_scene  # noqa: E402
 from flexmb_core.scene import load_scene  # noqa: E402
 from flexmb_core.simulator import Simulator  # noqa: E402
 from flexmb_io import topics as T  # noqa: E402
-from flexmb_io.twin import RunnerOptions, TwinRunner  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -38,13 +37,7 @@ SPAN = 2.0          # s of the law streamed (the blended start and the fastest l
 @pytest.fixture(scope="module")
 def law():
     model = compile_scene(load_scene(str(ROOT / SCENE)))
-    smooth = TwinRunner(model, options=RunnerOptions(command_source="scene"))
-    smooth.start(warmup=False)
-    peak = 0.0
-    while smooth.t < SPAN - 1e-9:
-        smooth.step()
-        peak = max(peak, float(np.abs(smooth.sample(full=False).actuator_forces).max()))
-    return Simulator(model), peak
+    return Simulator(model), smooth_peak_force(model, SPAN)
 
 
 def _stamp(m) -> float:
