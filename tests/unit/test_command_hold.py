@@ -322,13 +322,17 @@ def test_a_backlog_at_the_start_of_a_stream_does_not_run_the_legs_away(stewart):
     assert late < 1.5 * smooth, (late, smooth)      # measured 197 N against 159 N
 
 
-def _stream_peak(runner, prog, tn, arrive, t_end: float, after: float = 0.0) -> float:
+def _stream_peak(runner, prog, tn, arrive, t_end: float, after: float = 0.0, arrival=None) -> float:
     """Peak |leg force| (N) of a started ``runner`` over (``after``, ``t_end``] when the law ``prog``
-    sampled at times ``tn`` arrives as bare lengths at ``arrive`` (s, in order)."""
+    sampled at times ``tn`` arrives as bare lengths at ``arrive`` (s, in order: the twin's time at
+    which each is applied). ``arrival``: each sample's wall-clock arrival passed with it (s, a live
+    node's; NaN: the sample was lost and is not applied); None: none (the twin's time)."""
     k, peak = 0, 0.0
     while runner.t < t_end - 1e-9:
         while k < tn.size and arrive[k] <= runner.t + 1e-12:
-            assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k])) is None
+            a = None if arrival is None else float(arrival[k])
+            if a is None or not math.isnan(a):
+                assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k]), a) is None
             k += 1
         assert runner.step().advanced
         if runner.t > after:
@@ -409,19 +413,10 @@ def _applied_late_and_early(tn: np.ndarray, seed: int, lost_from: float | None =
     return arrival, applied
 
 
-def _applied_stream_peak(model, prog, tn, arrival, applied, on_wall: bool, t_end: float = 2.5) -> float:
-    runner = TwinRunner(model, options=RunnerOptions(command_hold="smooth"))
+def _started(model) -> TwinRunner:
+    runner = TwinRunner(model)
     runner.start(warmup=False)
-    k, peak = 0, 0.0
-    while runner.t < t_end - 1e-9:
-        while k < tn.size and applied[k] <= runner.t + 1e-12:
-            if not math.isnan(arrival[k]):
-                assert runner.command_array("/flexmb_twin/commands", prog.command_lengths(tn[k]),
-                                            float(arrival[k]) if on_wall else None) is None
-            k += 1
-        assert runner.step().advanced
-        peak = max(peak, float(np.abs(runner.sample(full=False).actuator_forces).max()))
-    return peak
+    return runner
 
 
 @pytest.mark.parametrize("seed,lost_from", [(1, None), (2, None), (3, 1.2)])
@@ -436,7 +431,7 @@ def test_wall_clock_arrivals_keep_a_stream_applied_at_jittered_twin_times_smooth
     smooth = _peak_force(model, prog, None, 0.0)
     tn = np.arange(2600) / 1000.0
     arrival, applied = _applied_late_and_early(tn, seed, lost_from)
-    on_wall = _applied_stream_peak(model, prog, tn, arrival, applied, True)
+    on_wall = _stream_peak(_started(model), prog, tn, applied, 2.5, arrival=arrival)
     assert abs(on_wall - smooth) <= 0.10 * smooth, (on_wall, smooth)
 
 
@@ -455,9 +450,9 @@ def test_a_live_1khz_streams_arrivals_give_the_smooth_peak_force(stewart, record
     applied, arrival = data["log_ns"] * 1e-9, data["arrival_ns"] * 1e-9
     t_end = float(applied[-1])           # while the stream runs (an abruptly ending stream fades out)
     smooth = _peak_force(model, prog, None, 0.0, t_end=float(tn[-1]))     # the law over the same span
-    on_wall = _applied_stream_peak(model, prog, tn, arrival, applied, True, t_end=t_end)
+    on_wall = _stream_peak(_started(model), prog, tn, applied, t_end, arrival=arrival)
     assert abs(on_wall - smooth) <= 0.10 * smooth, (on_wall, smooth)
-    assert _applied_stream_peak(model, prog, tn, arrival, applied, False, t_end=t_end) > 5 * smooth
+    assert _stream_peak(_started(model), prog, tn, applied, t_end) > 5 * smooth
 
 
 def test_the_step_hold_is_what_rang_the_legs(stewart):
