@@ -162,6 +162,11 @@ class Simulator:
         else:
             res = self._static.solve_at(self.state, t_new, lam)
         self.stats.wall_time_s += time.perf_counter() - t0
+        return self._account(res, t_new)
+
+    def _account(self, res: StepResult, t_new: float) -> StepResult:
+        """Count the step to ``t_new`` (s) that gave ``res`` in the statistics; raise as
+        :meth:`step` documents when it failed."""
         self.stats.steps += 1
         self.stats.iterations_total += res.iterations
         self.stats.iterations_max = max(self.stats.iterations_max, res.iterations)
@@ -190,14 +195,57 @@ class Simulator:
 
     def run(self, until: float, dt: float | None = None,
             callback: Callable[["Simulator", StepResult], None] | None = None) -> RunStats:
-        """Step until ``t ≥ until`` (the last step is shortened to land on it)."""
+        """Step until ``t ≥ until`` (the last step is shortened to land on it).
+
+        Without a ``callback``, the steps of a dynamic run whose commands, loads and driven
+        supports no longer change (a finished load ramp, no actuators or lengths held by
+        :meth:`set_commands`, no servos) run in one numba call per stretch of them: the same
+        arithmetic, results and statistics as step by step, without the Python of each step."""
         dt = self.spec.dt if dt is None else dt
         while self.state.t < until - 1e-12 * max(1.0, until):
+            count = self._steady_steps(until, dt) if callback is None else 0
+            if count:
+                self._run_steady(count, dt)
+                continue
             h = min(dt, until - self.state.t)
             res = self.step(h)
             if callback is not None:
                 callback(self, res)
         return self.stats
+
+    def _steady_lam(self) -> np.ndarray | None:
+        """The stretches every coming step commands, when they no longer change: no actuators,
+        or lengths held by :meth:`set_commands` and no servos; else None."""
+        if not self._lengths.size:
+            return self._lengths
+        if self._override is not None and self._servo is None:
+            return self._override / self.model.actuators.l0
+        return None
+
+    def _steady_steps(self, until: float, dt: float) -> int:
+        """How many whole steps ``dt`` towards ``until`` may run in one call (0: step by step).
+        One step short of ``until``: the last, maybe shortened one, goes step by step."""
+        if self._dynamic is None or self._steady_lam() is None or not self._dynamic.fast.steady(self.state.t):
+            return 0
+        count = int((until - self.state.t) / dt) - 1
+        return count if count >= 2 else 0
+
+    def _run_steady(self, count: int, dt: float) -> None:
+        """``count`` steps ``dt`` in one call (:meth:`DynamicIntegrator.steps`), counted as
+        :meth:`step` counts them."""
+        t0 = time.perf_counter()
+        done, res, tally = self._dynamic.steps(self.state, dt, self._steady_lam(), count)
+        self.stats.wall_time_s += time.perf_counter() - t0
+        st = self.stats
+        st.steps += done
+        st.iterations_total += int(tally[1])
+        st.iterations_max = max(st.iterations_max, int(tally[2]))
+        if done:
+            st.max_residual = max(st.max_residual, float(tally[3]))
+        if done == count:
+            self.last = res
+        else:           # the step whose attempt failed, settled by the policy
+            self._account(res, self.state.t + dt)
 
     # -- outputs --------------------------------------------------------------------------
     def energy(self) -> dict:

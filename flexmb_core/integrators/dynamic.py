@@ -115,6 +115,7 @@ class DynamicIntegrator:
         st = self.data.state
         st.assign(state)
         self.fast.attempt(st, self.spec.dt, st.lam.copy())
+        self.fast.attempts(self.spec.dt, st.lam.copy(), 1)     # the steady runs' loop (Simulator.run)
         self.fast.invalidate()
         self.data.buf[:] = saved.buf
         self._tan[T_HELD] = self._tan[T_AGE] = self._tan[T_COUNT] = 0.0
@@ -159,11 +160,31 @@ class DynamicIntegrator:
         retried in 2, 4, … sub-steps (policy ``substep``) with the stretches interpolated linearly
         (and backward differences); ``state`` is left unchanged if nothing converges.
         """
+        self._check(state)
+        return self._settle(state, dt, lam_new, self.fast.attempt(state, dt, lam_new, lam_rate))
+
+    def steps(self, state: State, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
+        """Up to ``count`` steps ``dt`` to the same stretches ``lam_new`` (no rates given) in one
+        numba call, for a run whose loads and driven supports no longer change
+        (:meth:`~.fast.NumbaStep.steady`): what as many :meth:`step` calls would give. Stops after
+        the first step that fails its attempt, which the policy then settles as :meth:`step` does.
+        Returns the steps the numba call accepted, the last step's result (that settled one, if
+        any) and the tally of the accepted ones (:meth:`~.fast.NumbaStep.attempts`)."""
+        self._check(state)
+        done, res, tally = self.fast.attempts(dt, lam_new, count)
+        if done < count:
+            res = self._settle(state, dt, lam_new, res)
+        return done, res, tally
+
+    def _check(self, state: State) -> None:
         if state is not self.data.state:
             raise ValueError("the integrator advances the state of its step data only (sim.state)")
         if self._backup is None:
             self._backup = state.copy()
-        res = self.fast.attempt(state, dt, lam_new, lam_rate)
+
+    def _settle(self, state: State, dt: float, lam_new: np.ndarray, res: StepResult) -> StepResult:
+        """The step's result after its first attempt ``res``: that one when it converged or the
+        policy is not ``substep``, else the split step's."""
         # a failed attempt leaves the state at the step's start (accept_flagged: at its last iterate)
         if res.converged or self.spec.on_unconverged != "substep":
             return res

@@ -399,6 +399,28 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     return OK
 
 
+@njit(cache=True, nogil=True)
+def model_steps(count, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay,
+                io, dt, guarded, tally):
+    """Up to ``count`` steps of :func:`model_step` (same arguments), one after the other at the
+    same stretches, loads and driven supports; stops at the first that fails, which leaves the
+    state at its start as :func:`model_step` does. ``tally (4,)`` out: steps accepted, their Newton
+    iterations summed, the most in one step, the largest relative residual. ``io`` holds the last
+    attempt's outputs. Returns the last attempt's code."""
+    code = OK
+    tally[:] = 0.0
+    for _ in range(count):
+        code = model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi,
+                          lay, io, dt, guarded)
+        if code != OK:
+            break
+        tally[0] += 1.0
+        tally[1] += io[IO_IT]
+        tally[2] = max(tally[2], io[IO_IT])
+        tally[3] = max(tally[3], io[IO_REL])
+    return code
+
+
 def _constant_after(sig) -> float:
     """Time after which ``sig`` is constant (+inf if never: sine, spin-up, tables of unknown end)."""
     if sig.kind == "constant":
@@ -464,6 +486,11 @@ class NumbaStep:
                 + ([m.gravity_signal] if self._gravity else []))
         self._still_after = max([_constant_after(x) for x in sigs], default=-math.inf)
         self._still = False
+        self._tally = np.zeros(4)
+        # steps that need nothing from Python between them may run in one call (attempts): none
+        # with driven supports (their values move with t) or keeping failed iterates (the
+        # integrator's policy starts from the step's start)
+        self._batchable = self.packs._q_drive is None and not par[P_KEEP]
 
     def invalidate(self) -> None:
         """Someone else (``initialize``, a sub-step) formed ``f_ext``: recompute it next time."""
@@ -504,6 +531,24 @@ class NumbaStep:
                 ws.f_ext += gs * m.gravity_vector
         self._still = t >= self._still_after
 
+    def steady(self, t: float) -> bool:
+        """Whether every step from ``t`` (s) on sees the same loads and driven supports, so that
+        :meth:`attempts` may run several (the loads were formed at a time after the signals'
+        last change)."""
+        return self._batchable and self._still and t >= self._still_after
+
+    def attempts(self, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
+        """Up to ``count`` attempts of steps ``dt`` to the stretches ``lam_new`` in one numba call
+        (:func:`model_steps`), for a :meth:`steady` run: the same arithmetic as as many calls of
+        :meth:`attempt` from the state of the integrator's step data. Returns the steps accepted,
+        the last attempt's result (a failure leaves the state at that step's start) and the tally ``[steps, iterations, most iterations in a
+        step, largest relative residual]`` of the accepted ones."""
+        d, dlay, f_ext, r, env, inv_diag, stats = self._shared
+        cf, ci, wf, wi = self._packs
+        code = model_steps(count, d, dlay, lam_new, self._no_rate, False, f_ext, r, env, inv_diag, stats, cf, ci, wf,
+                           wi, self._lay, self._io, dt, self.integ.guard.enabled, self._tally)
+        return int(self._tally[0]), self._result(code), self._tally
+
     def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None) -> StepResult:
         """The Newton attempt of the step ``state.t → state.t + dt`` to the actuator stretches
         ``lam_new`` (rates ``lam_rate`` or, for damped models, the integrator's backward
@@ -521,8 +566,12 @@ class NumbaStep:
         cf, ci, wf, wi = self._packs
         code = model_step(d, dlay, lam_new, lam_rate if rate_given else self._no_rate, rate_given, f_ext, r, env,
                           inv_diag, stats, cf, ci, wf, wi, self._lay, self._io, dt, integ.guard.enabled)
+        return self._result(code)
+
+    def _result(self, code: int) -> StepResult:
+        """The result of the attempt that left ``code`` and its outputs in ``io``."""
         it, rel, inc, strain, kin, grav = self._io[:IO_X].tolist()
-        integ.ws.dissipation = self._io[IO_DISS]
+        self.integ.ws.dissipation = self._io[IO_DISS]
         if code == OK:
             return StepResult(True, int(it), rel, inc, 1, kin, strain, grav)
         return self._failure(code, int(it), rel, inc, strain, kin, grav)
