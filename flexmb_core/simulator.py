@@ -197,15 +197,17 @@ class Simulator:
             callback: Callable[["Simulator", StepResult], None] | None = None) -> RunStats:
         """Step until ``t ≥ until`` (the last step is shortened to land on it).
 
-        Without a ``callback``, the steps of a dynamic run whose commands, loads and driven
-        supports no longer change (a finished load ramp, no actuators or lengths held by
-        :meth:`set_commands`, no servos) run in one numba call per stretch of them: the same
-        arithmetic, results and statistics as step by step, without the Python of each step."""
+        Without a ``callback``, the steps of a dynamic run whose commands do not change (no
+        actuators, or lengths held by :meth:`set_commands`, no servos) and that has no driven
+        supports run in one numba call per batch of them (:meth:`DynamicIntegrator.steps`): all
+        the steady ones once the loads no longer change, 256 at a time while they do (without
+        moment loads). The same arithmetic, results and statistics as step by step, without the
+        Python of each step."""
         dt = self.spec.dt if dt is None else dt
         while self.state.t < until - 1e-12 * max(1.0, until):
-            count = self._steady_steps(until, dt) if callback is None else 0
+            count = self._batch_steps(until, dt) if callback is None else 0
             if count:
-                self._run_steady(count, dt)
+                self._run_batch(count, dt)
                 continue
             h = min(dt, until - self.state.t)
             res = self.step(h)
@@ -222,19 +224,19 @@ class Simulator:
             return self._override / self.model.actuators.l0
         return None
 
-    def _steady_steps(self, until: float, dt: float) -> int:
+    def _batch_steps(self, until: float, dt: float) -> int:
         """How many whole steps ``dt`` towards ``until`` may run in one call (0: step by step).
         One step short of ``until``: the last, maybe shortened one, goes step by step."""
-        if self._dynamic is None or self._steady_lam() is None or not self._dynamic.fast.steady(self.state.t):
+        if self._dynamic is None or self._steady_lam() is None or not self._dynamic.fast.batches(self.state.t):
             return 0
         count = int((until - self.state.t) / dt) - 1
         return count if count >= 2 else 0
 
-    def _run_steady(self, count: int, dt: float) -> None:
-        """``count`` steps ``dt`` in one call (:meth:`DynamicIntegrator.steps`), counted as
+    def _run_batch(self, count: int, dt: float) -> None:
+        """Up to ``count`` steps ``dt`` in one call (:meth:`DynamicIntegrator.steps`), counted as
         :meth:`step` counts them."""
         t0 = time.perf_counter()
-        done, res, tally = self._dynamic.steps(self.state, dt, self._steady_lam(), count)
+        done, res, tally, settled = self._dynamic.steps(self.state, dt, self._steady_lam(), count)
         self.stats.wall_time_s += time.perf_counter() - t0
         st = self.stats
         st.steps += done
@@ -242,10 +244,10 @@ class Simulator:
         st.iterations_max = max(st.iterations_max, int(tally[2]))
         if done:
             st.max_residual = max(st.max_residual, float(tally[3]))
-        if done == count:
-            self.last = res
-        else:           # the step whose attempt failed, settled by the policy
+        if settled:     # the step whose attempt failed, settled by the policy
             self._account(res, self.state.t + dt)
+        else:
+            self.last = res
 
     # -- outputs --------------------------------------------------------------------------
     def energy(self) -> dict:

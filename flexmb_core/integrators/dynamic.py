@@ -115,7 +115,7 @@ class DynamicIntegrator:
         st = self.data.state
         st.assign(state)
         self.fast.attempt(st, self.spec.dt, st.lam.copy())
-        self.fast.attempts(self.spec.dt, st.lam.copy(), 1)     # the steady runs' loop (Simulator.run)
+        self.fast.attempts(st.t, self.spec.dt, st.lam.copy(), 1)     # Simulator.run's batches
         self.fast.invalidate()
         self.data.buf[:] = saved.buf
         self._tan[T_HELD] = self._tan[T_AGE] = self._tan[T_COUNT] = 0.0
@@ -163,18 +163,21 @@ class DynamicIntegrator:
         self._check(state)
         return self._settle(state, dt, lam_new, self.fast.attempt(state, dt, lam_new, lam_rate))
 
-    def steps(self, state: State, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
+    def steps(self, state: State, dt: float, lam_new: np.ndarray,
+              count: int) -> tuple[int, StepResult, np.ndarray, bool]:
         """Up to ``count`` steps ``dt`` to the same stretches ``lam_new`` (no rates given) in one
-        numba call, for a run whose loads and driven supports no longer change
-        (:meth:`~.fast.NumbaStep.steady`): what as many :meth:`step` calls would give. Stops after
-        the first step that fails its attempt, which the policy then settles as :meth:`step` does.
-        Returns the steps the numba call accepted, the last step's result (that settled one, if
-        any) and the tally of the accepted ones (:meth:`~.fast.NumbaStep.attempts`)."""
+        numba call, where the integrator's numba step batches them
+        (:meth:`~.fast.NumbaStep.batches`): what as many :meth:`step` calls would give. Stops
+        after the first step that fails its attempt, which the policy then settles as :meth:`step`
+        does. Returns the steps the numba call accepted, the last step's result (that settled one,
+        if any), the tally of the accepted ones (:meth:`~.fast.NumbaStep.attempts`) and whether
+        the last step was settled."""
         self._check(state)
-        done, res, tally = self.fast.attempts(dt, lam_new, count)
-        if done < count:
+        done, res, tally = self.fast.attempts(state.t, dt, lam_new, count)
+        failed = not res.converged
+        if failed:
             res = self._settle(state, dt, lam_new, res)
-        return done, res, tally
+        return done, res, tally, failed
 
     def _check(self, state: State) -> None:
         if state is not self.data.state:

@@ -400,16 +400,21 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
 
 
 @njit(cache=True, nogil=True)
-def model_steps(count, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay,
-                io, dt, guarded, tally):
+def model_steps(count, loads, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf,
+                wi, lay, io, dt, guarded, tally):
     """Up to ``count`` steps of :func:`model_step` (same arguments), one after the other at the
-    same stretches, loads and driven supports; stops at the first that fails, which leaves the
-    state at its start as :func:`model_step` does. ``tally (4,)`` out: steps accepted, their Newton
-    iterations summed, the most in one step, the largest relative residual. ``io`` holds the last
-    attempt's outputs. Returns the last attempt's code."""
+    same stretches and driven supports; stops at the first that fails, which leaves the state at
+    its start as :func:`model_step` does. ``loads (count, ndof)``: the loads ``f_ext`` of each step
+    (N), copied in before it; ``(0, ndof)``: ``f_ext`` as it is, for every step. ``tally (4,)``
+    out: steps accepted, their Newton iterations summed, the most in one step, the largest
+    relative residual. ``io`` holds the last attempt's outputs. Returns the last attempt's code."""
     code = OK
     tally[:] = 0.0
-    for _ in range(count):
+    tabulated = loads.shape[0] > 0
+    for k in range(count):
+        if tabulated:
+            for i in range(f_ext.size):
+                f_ext[i] = loads[k, i]
         code = model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi,
                           lay, io, dt, guarded)
         if code != OK:
@@ -419,6 +424,10 @@ def model_steps(count, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, in
         tally[2] = max(tally[2], io[IO_IT])
         tally[3] = max(tally[3], io[IO_REL])
     return code
+
+
+# Steps of one model_steps call whose loads are tabulated (a load ramp): a table of this many rows
+TABLE_STEPS = 256
 
 
 def _constant_after(sig) -> float:
@@ -489,8 +498,12 @@ class NumbaStep:
         self._tally = np.zeros(4)
         # steps that need nothing from Python between them may run in one call (attempts): none
         # with driven supports (their values move with t) or keeping failed iterates (the
-        # integrator's policy starts from the step's start)
+        # integrator's policy starts from the step's start); while the loads change, only
+        # without moment loads (their scales are items of the packs, set per step by loads())
         self._batchable = self.packs._q_drive is None and not par[P_KEEP]
+        self._tabulable = self._batchable and not (mo.follower_signals or mo.cons_signals)
+        self._no_table = np.zeros((0, m.ndof))
+        self._table: np.ndarray | None = None        # (TABLE_STEPS, ndof), on first use
 
     def invalidate(self) -> None:
         """Someone else (``initialize``, a sub-step) formed ``f_ext``: recompute it next time."""
@@ -532,22 +545,43 @@ class NumbaStep:
         self._still = t >= self._still_after
 
     def steady(self, t: float) -> bool:
-        """Whether every step from ``t`` (s) on sees the same loads and driven supports, so that
-        :meth:`attempts` may run several (the loads were formed at a time after the signals'
-        last change)."""
+        """Whether every step from ``t`` (s) on sees the same loads and driven supports (the
+        loads were formed at a time after the signals' last change)."""
         return self._batchable and self._still and t >= self._still_after
 
-    def attempts(self, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
-        """Up to ``count`` attempts of steps ``dt`` to the stretches ``lam_new`` in one numba call
-        (:func:`model_steps`), for a :meth:`steady` run: the same arithmetic as as many calls of
-        :meth:`attempt` from the state of the integrator's step data. Returns the steps accepted,
-        the last attempt's result (a failure leaves the state at that step's start) and the tally ``[steps, iterations, most iterations in a
-        step, largest relative residual]`` of the accepted ones."""
+    def batches(self, t: float) -> bool:
+        """Whether :meth:`attempts` may run several steps from ``t`` (s): steady ones, or ones
+        whose loads it can tabulate beforehand."""
+        return self._tabulable or self.steady(t)
+
+    def attempts(self, t: float, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
+        """Attempts of steps ``dt`` from ``t`` (the time of the integrator's step data, s) to the
+        stretches ``lam_new`` in one numba call (:func:`model_steps`) where :meth:`batches`: up
+        to ``count``, and up to :data:`TABLE_STEPS` while the loads change, whose ``f_ext`` of each
+        step is formed first, as :meth:`attempt` would form it. The same arithmetic as as many
+        calls of :meth:`attempt`. Returns the steps accepted, the last attempt's result (a
+        failure leaves the state at that step's start) and the tally ``[steps, iterations, most
+        iterations in a step, largest relative residual]`` of the accepted ones."""
+        table = self._no_table
+        if not self.steady(t):
+            count = min(count, TABLE_STEPS)
+            if self._table is None:
+                self._table = np.zeros((TABLE_STEPS, self.model.ndof))
+            table = self._table[:count]
+            af = self.integ.af
+            for k in range(count):      # t advances as the kernel advances it: t_n + dt
+                t_new = t + dt
+                self.loads(t_new - af * dt if self._ch else t_new)
+                table[k] = self.integ.ws.f_ext
+                t = t_new
         d, dlay, f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = model_steps(count, d, dlay, lam_new, self._no_rate, False, f_ext, r, env, inv_diag, stats, cf, ci, wf,
-                           wi, self._lay, self._io, dt, self.integ.guard.enabled, self._tally)
-        return int(self._tally[0]), self._result(code), self._tally
+        code = model_steps(count, table, d, dlay, lam_new, self._no_rate, False, f_ext, r, env, inv_diag, stats, cf, ci,
+                           wf, wi, self._lay, self._io, dt, self.integ.guard.enabled, self._tally)
+        done = int(self._tally[0])
+        if table.shape[0] and done < count:
+            self.invalidate()           # the loads were formed for steps that did not run
+        return done, self._result(code), self._tally
 
     def attempt(self, state, dt: float, lam_new: np.ndarray, lam_rate: np.ndarray | None = None) -> StepResult:
         """The Newton attempt of the step ``state.t → state.t + dt`` to the actuator stretches

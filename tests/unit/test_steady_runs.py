@@ -1,8 +1,10 @@
-"""``Simulator.run`` without a callback runs the steps whose commands, loads and driven supports no
-longer change in one numba call per stretch (``integrators/fast.py: model_steps``). Those runs
-must be the step-by-step run, bit for bit: the state, the step data (held tangent, stretch
-history, the guard's ledger), the statistics and the last result — including the steps whose
-first attempt fails inside such a stretch and that the policy then splits or stops at."""
+"""``Simulator.run`` without a callback runs the steps of a run whose commands do not change and
+that has no driven supports in one numba call per batch (``integrators/fast.py: model_steps``):
+all the steady steps once the loads no longer change, 256 at a time with their loads formed
+beforehand while they do. Those runs must be the step-by-step run, bit for bit: the state, the
+step data (held tangent, stretch history, the guard's ledger), the statistics and the last result
+— including the steps whose first attempt fails inside a batch and that the policy then splits or
+stops at."""
 
 import copy
 import dataclasses
@@ -33,14 +35,15 @@ def _both(make, until, spy):
 
 
 def _calls(sim):
-    """Record the (count, accepted) of each batched stretch of ``sim``."""
+    """Record (time, steps asked, accepted, the last settled) of each batch of ``sim``."""
     calls = []
     steps = sim._dynamic.steps
 
     def counted(state, dt, lam, count):
-        done, res, tally = steps(state, dt, lam, count)
-        calls.append((count, done))
-        return done, res, tally
+        t = state.t
+        done, res, tally, settled = steps(state, dt, lam, count)
+        calls.append((round(t, 9), count, done, settled))
+        return done, res, tally, settled
     sim._dynamic.steps = counted
     return calls
 
@@ -58,31 +61,50 @@ def _b1(**solver):
     return lambda: sc.dict_sim(copy.deepcopy(d), lambda m, s: s.initialize())
 
 
-def test_a_steady_stretch_runs_in_one_call_and_equals_the_step_by_step_run():
+def test_batches_equal_the_step_by_step_run():
     calls = []
     a, b, errors = _both(_b1(until=0.5), 0.5, lambda s: calls.append(_calls(s)))
     assert errors == [None, None]
     _assert_same(a, b)
-    (stretches,) = calls
-    # the load ramp (0.1 s) goes step by step, the 400 steps after it but the last in one call
-    assert stretches == [(398, 398)] and a.stats.steps == 500
+    (batches,) = calls
+    # 256 steps with their loads tabulated (the ramp ends at 0.1 s), then the steady rest but the
+    # last one or two steps (one step short of until, on the float times), which go on their own
+    assert batches[0] == (0.0, 499, 256, False) and len(batches) == 2
+    t, asked, done, settled = batches[1]
+    assert t == 0.256 and asked == done >= 242 and not settled and a.stats.steps == 500
 
 
-def test_a_failed_attempt_inside_a_stretch_is_split_as_step_by_step():
-    """Six Newton iterations at most: a few steps after the ramp (t = 0.371 … 0.43 s) need more,
-    fail their attempt and are split into sub-steps; the stretch resumes after each."""
+def test_moment_loads_ramp_step_by_step_then_batch():
+    """Moment loads' scales are set per step outside f_ext: no table while they ramp."""
+    calls = []
+
+    def make():
+        d = sc.b1()
+        sc.moments(True)(d)
+        d["solver"]["until"] = 0.3
+        return sc.dict_sim(d, lambda m, s: s.initialize())
+    a, b, errors = _both(make, 0.3, lambda s: calls.append(_calls(s)))
+    assert errors == [None, None]
+    _assert_same(a, b)
+    (batches,) = calls
+    assert len(batches) == 1 and batches[0][0] >= 0.1 and batches[0][2] > 150
+
+
+def test_a_failed_attempt_inside_a_batch_is_split_as_step_by_step():
+    """Six Newton iterations at most: a few steps (t = 0.016 s in the ramp, 0.371 … 0.43 s after
+    it) need more, fail their attempt and are split into sub-steps; the batches resume after each."""
     calls = []
     a, b, errors = _both(_b1(until=0.5, max_iterations=6), 0.5, lambda s: calls.append(_calls(s)))
     assert errors == [None, None]
     _assert_same(a, b)
-    (stretches,) = calls
-    assert sum(done < count for count, done in stretches) >= 3
+    (batches,) = calls
+    assert sum(settled for *_, settled in batches) >= 3
     assert a.stats.substepped_steps >= 3
 
 
-def test_a_failed_step_inside_a_stretch_stops_the_run_at_the_same_step():
+def test_a_failed_step_inside_a_batch_stops_the_run_at_the_same_step():
     """The same run with the policy ``stop`` from 0.3 s on: it stops at t = 0.371 s, inside a
-    stretch, with the message and the state of the step-by-step run."""
+    batch, with the message and the state of the step-by-step run."""
     calls = []
     make = _b1(until=0.5, max_iterations=6)
 
@@ -95,7 +117,7 @@ def test_a_failed_step_inside_a_stretch_stops_the_run_at_the_same_step():
     assert errors[0] is not None and errors[0] == errors[1]
     assert errors[0].startswith("step to t = 0.371 s did not converge: no convergence in 6 iterations")
     _assert_same(a, b)
-    assert calls[0] and calls[0][-1][1] < calls[0][-1][0]
+    assert calls[0] and calls[0][-1][3]
 
 
 def test_held_commands_run_in_one_call_and_scene_commands_step_by_step():
@@ -110,7 +132,7 @@ def test_held_commands_run_in_one_call_and_scene_commands_step_by_step():
     a, b, errors = _both(held, 0.2, lambda s: calls.append(_calls(s)))
     assert errors == [None, None]
     _assert_same(a, b)
-    assert calls[0] and sum(done for _, done in calls[0]) > 150
+    assert calls[0] and sum(done for _, _, done, _ in calls[0]) > 150
 
     def scene():
         sim = sc.scene_sim("stewart_platform_bars")
