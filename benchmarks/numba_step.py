@@ -82,17 +82,24 @@ print(statistics.median(blocks))
 """
 
 
-def _against(tree: Path, scenes: list[str], rounds: int, steps: int) -> int:
+def times_against(tree: Path, name: str, rounds: int, steps: int) -> dict[str, list[float]]:
+    """µs per step of scene ``name`` in ``tree`` ('before') and in this tree ('after'), each in
+    its own process and numba cache, interleaved round by round."""
     import subprocess
 
+    times: dict[str, list[float]] = {"before": [], "after": []}
+    for _ in range(rounds):
+        for label, src in (("before", tree), ("after", ROOT)):
+            env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(src) / ".cache" / "numba_against"))
+            out = subprocess.run([sys.executable, "-c", _PROBE, str(src), str(ROOT / "scenes" / f"{name}.yaml"),
+                                  str(steps)], capture_output=True, text=True, env=env, cwd=src, check=True)
+            times[label].append(float(out.stdout.strip().splitlines()[-1]))
+    return times
+
+
+def _against(tree: Path, scenes: list[str], rounds: int, steps: int) -> int:
     for name in scenes:
-        times: dict[str, list[float]] = {"before": [], "after": []}
-        for _ in range(rounds):
-            for label, src in (("before", tree), ("after", ROOT)):
-                env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(src) / ".cache" / "numba_against"))
-                out = subprocess.run([sys.executable, "-c", _PROBE, str(src), str(ROOT / "scenes" / f"{name}.yaml"),
-                                      str(steps)], capture_output=True, text=True, env=env, cwd=src, check=True)
-                times[label].append(float(out.stdout.strip().splitlines()[-1]))
+        times = times_against(tree, name, rounds, steps)
         ratios = [b / a for b, a in zip(times["before"], times["after"])]
         print(f"{name:26s} before {' / '.join(f'{x:.0f}' for x in times['before'])} µs/step, after "
               f"{' / '.join(f'{x:.0f}' for x in times['after'])} µs/step: {statistics.median(ratios):.2f}× "

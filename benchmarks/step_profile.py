@@ -171,16 +171,10 @@ def profile(name: str, seconds: float) -> dict:
 
 
 def before_after(tree: Path, name: str, rounds: int, steps: int) -> dict:
-    """µs per step in ``tree`` and here, each in its own process and numba cache, interleaved."""
+    """µs per step in ``tree`` and here (``numba_step.py --against``'s measurement), medians."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    from numba_step import _PROBE
-    times: dict[str, list[float]] = {"before": [], "after": []}
-    for _ in range(rounds):
-        for label, src in (("before", tree), ("after", ROOT)):
-            env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(src) / ".cache" / "numba_against"))
-            out = subprocess.run([sys.executable, "-c", _PROBE, str(src), str(ROOT / "scenes" / f"{name}.yaml"),
-                                  str(steps)], capture_output=True, text=True, env=env, cwd=src, check=True)
-            times[label].append(float(out.stdout.strip().splitlines()[-1]))
+    from numba_step import times_against
+    times = times_against(tree, name, rounds, steps)
     ratios = [b / a for b, a in zip(times["before"], times["after"])]
     return {"before_us": statistics.median(times["before"]), "after_us": statistics.median(times["after"]),
             "speedup": statistics.median(ratios), "before_all": times["before"], "after_all": times["after"]}
