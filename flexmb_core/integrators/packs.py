@@ -33,6 +33,7 @@ from ..model.assembly import apply_drives
 from ..model.model import Model, TrussGroup
 from ..solvers.banded import (BACKWARD_ERROR_TOL, STATIC_PIVOT, _factor_kernel, _refine_kernel, _solve_kernel,
                               refine_scratch)
+from .views import c_view2, c_view3, c_view4
 
 # Items of the whole model (rows of the layout table).
 (L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
@@ -72,7 +73,7 @@ def view1(p, row):
 
 @register_jitable
 def view2(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2]))
+    return c_view2(p, row[0], (row[1], row[2]))      # p[row[0]:row[0] + row[5]].reshape(…) (.views)
 
 
 # The tangent's factorization and solve, shared by the numba steps of dynamics and statics.
@@ -207,12 +208,12 @@ def singular_note(omega: float) -> str:
 
 @register_jitable
 def view3(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3]))
+    return c_view3(p, row[0], (row[1], row[2], row[3]))
 
 
 @register_jitable
 def view4(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3], row[4]))
+    return c_view4(p, row[0], (row[1], row[2], row[3], row[4]))
 
 
 @njit(cache=True, nogil=True)
