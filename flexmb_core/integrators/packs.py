@@ -21,7 +21,7 @@ import dataclasses
 
 import numpy as np
 from numba import njit
-from numba.extending import register_jitable
+from numba.extending import overload, register_jitable
 
 from ..kernels.constraints import director_tie_group, hinge_group, rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_scratch
@@ -64,16 +64,21 @@ S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, NS = range(9)
 # Output slots of io.
 
 
-# Views of a pack (register_jitable: inlined into the caller, so that a view of a read-only and
-# of a writable pack are not two signatures of one dispatcher).
+# Views of a pack (register_jitable, overload: inlined into the caller, so that a view of a
+# read-only and of a writable pack are not two signatures of one dispatcher; callable from Python).
 @register_jitable
 def view1(p, row):
     return p[row[0]:row[0] + row[5]]
 
 
-@register_jitable
 def view2(p, row):
-    return c_view2(p, row[0], (row[1], row[2]))      # p[row[0]:row[0] + row[5]].reshape(…) (.views)
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2]))
+
+
+@overload(view2)
+def _view2_jit(p, row):
+    # in numba: the same view without reshape's runtime helper (.views)
+    return lambda p, row: c_view2(p, row[0], (row[1], row[2]))
 
 
 # The tangent's factorization and solve, shared by the numba steps of dynamics and statics.
@@ -206,14 +211,22 @@ def singular_note(omega: float) -> str:
             "refinement): a mechanism with a free motion needs a support")
 
 
-@register_jitable
 def view3(p, row):
-    return c_view3(p, row[0], (row[1], row[2], row[3]))
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3]))
 
 
-@register_jitable
+@overload(view3)
+def _view3_jit(p, row):
+    return lambda p, row: c_view3(p, row[0], (row[1], row[2], row[3]))
+
+
 def view4(p, row):
-    return c_view4(p, row[0], (row[1], row[2], row[3], row[4]))
+    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3], row[4]))
+
+
+@overload(view4)
+def _view4_jit(p, row):
+    return lambda p, row: c_view4(p, row[0], (row[1], row[2], row[3], row[4]))
 
 
 @njit(cache=True, nogil=True)
