@@ -18,6 +18,10 @@ the state as it was (under ``accept_flagged``: at the last iterate) and hands ba
 integrator, whose ``on_unconverged`` policy proceeds as for any failed attempt; its sub-steps are
 numba steps too.
 
+:func:`model_steps` runs several such steps in one call for :meth:`Simulator.run
+<flexmb_core.simulator.Simulator.run>` when nothing changes between them that Python would set
+(:meth:`NumbaStep.batches`); the arithmetic is that of as many calls of :func:`model_step`.
+
 The arrays travel in the packs of :mod:`.packs` (:class:`~.packs.ModelPacks`).
 """
 
