@@ -142,14 +142,8 @@ def _component_costs(model) -> dict:
             s += _energies(mb, mi, mj, mv, v, q, q0, gr)[0]
         return s
 
-    def best(f, *a, k=500):
-        f(1, *a)
-        times = []
-        for _ in range(7):
-            t0 = time.perf_counter()
-            f(k, *a)
-            times.append((time.perf_counter() - t0) / k * 1e6)
-        return min(times)
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from step_profile import best_us as best
 
     ga = (q, ws.zero_v, g.edofs, g.dax, g.dsec, g.w, g.nsec, g.mat, g.act, lam, lr, g.smap, ws.r, ws.kdata,
           *ws.frame_scratch[0], *ws.frame_structure[0])

@@ -78,7 +78,8 @@ def _rep_solve(k, rf, dq, env, inv_diag, stats, wf, wi, lay, par):
     return s
 
 
-def _best_us(f, *args, k: int) -> float:
+def best_us(f, *args, k: int = 500) -> float:
+    """µs per repetition of the njit loop ``f(k, *args)``: best of 7, after a first call."""
     f(1, *args)
     times = []
     for _ in range(7):
@@ -139,14 +140,14 @@ def _components(sim: Simulator) -> dict[str, float]:
     no_dlam = sim.spec.dt < 0.0
     args = (st.q, v, st.lam, lam_rate, c_v)
     tail = (no_dlam, st.mult, r, kdata, cf, ci, wf, wi, lay, par)
-    out = {"assembly, residual": _best_us(_rep_assemble, *args, False, *tail, k=200),
-           "assembly, residual + tangent": _best_us(_rep_assemble, *args, True, *tail, k=50)}
+    out = {"assembly, residual": best_us(_rep_assemble, *args, False, *tail, k=200),
+           "assembly, residual + tangent": best_us(_rep_assemble, *args, True, *tail, k=50)}
     coef = float(sim.data.tan[1]) or 1.0
-    out["LU factor"] = _best_us(_rep_factor, kdata.copy(), kdata, view1(wf, lay[L_MASSK]), coef, env, inv_diag, stats,
+    out["LU factor"] = best_us(_rep_factor, kdata.copy(), kdata, view1(wf, lay[L_MASSK]), coef, env, inv_diag, stats,
                                 int(par[P_NMULT]), wf, wi, lay, par, k=50)
     rf = view1(wf, lay[L_RF])
     rf[:] = np.linspace(-1.0, 1.0, rf.size)
-    out["LU solve"] = _best_us(_rep_solve, rf, view1(wf, lay[L_DQ]), env, inv_diag, stats, wf, wi, lay, par, k=500)
+    out["LU solve"] = best_us(_rep_solve, rf, view1(wf, lay[L_DQ]), env, inv_diag, stats, wf, wi, lay, par, k=500)
     return out
 
 
