@@ -17,6 +17,7 @@ import numpy as np
 
 from .errors import ConvergenceError, FlexmbError
 from .integrators.dynamic import DynamicIntegrator
+from .integrators.fast import TABLE_STEPS
 from .integrators.static import StaticSolver
 from .model.assembly import assemble
 from .model.model import Model
@@ -60,6 +61,7 @@ class Simulator:
         self._signal_actuators = [(i, s) for i, s in enumerate(act.commands) if s is not None and i not in driven]
         self._lengths = act.l0.copy()            # actuators with neither signal nor program hold L0
         self._program_buf = np.zeros(model.program_index.size)
+        self._lam_table: np.ndarray | None = None    # (TABLE_STEPS, na): batched steps' stretches
         # actuator servos (flexmb_core.servo): dynamics only — a static solve takes their steady
         # state, the commanded length itself
         self._servo = Servo(act.servo) if act.servo is not None and self.spec.analysis != "static" else None
@@ -194,25 +196,34 @@ class Simulator:
         return lengths
 
     def run(self, until: float, dt: float | None = None,
-            callback: Callable[["Simulator", StepResult], None] | None = None) -> RunStats:
-        """Step until ``t ≥ until`` (the last step is shortened to land on it).
+            callback: Callable[["Simulator", StepResult], None] | None = None, every: int = 1) -> RunStats:
+        """Step until ``t ≥ until`` (the last step is shortened to land on it); ``callback(sim,
+        result)`` after every ``every``-th step of this call and after the last one.
 
-        Without a ``callback``, the steps of a dynamic run whose commands do not change (no
-        actuators, or lengths held by :meth:`set_commands`, no servos) and that has no driven
-        supports run in one numba call per batch of them (:meth:`DynamicIntegrator.steps`): all
-        the steady ones once the loads no longer change, 256 at a time while they do (without
-        moment loads). The same arithmetic, results and statistics as step by step, without the
-        Python of each step."""
+        Between callbacks, the steps of a dynamic run without servos and driven supports run in
+        one numba call per batch of them (:meth:`DynamicIntegrator.steps`): when the commands do
+        not change (no actuators, or lengths held by :meth:`set_commands`), all the steady ones
+        once the loads no longer change; otherwise 256 at a time, their loads (without moment
+        loads) and the scene's commanded lengths formed beforehand, as :meth:`step` forms them.
+        The same arithmetic, results and statistics as step by step, without the Python of each
+        step's call. With a callback at every step (``every=1``) every step is a call of its own."""
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"every must be a whole number of steps ≥ 1, got {every!r}")
         dt = self.spec.dt if dt is None else dt
-        while self.state.t < until - 1e-12 * max(1.0, until):
-            count = self._batch_steps(until, dt) if callback is None else 0
-            if count:
+        end = until - 1e-12 * max(1.0, until)
+        start = self.stats.steps
+        while self.state.t < end:
+            count = 0
+            if callback is None:
+                count = self._batch_steps(until, dt)
+            elif every > 1:                    # a batch ends at the next callback's step
+                count = min(self._batch_steps(until, dt), every - (self.stats.steps - start) % every)
+            if count >= 2:
                 self._run_batch(count, dt)
-                continue
-            h = min(dt, until - self.state.t)
-            res = self.step(h)
-            if callback is not None:
-                callback(self, res)
+            else:
+                self.step(min(dt, until - self.state.t))
+            if callback is not None and ((self.stats.steps - start) % every == 0 or self.state.t >= end):
+                callback(self, self.last)
         return self.stats
 
     def _steady_lam(self) -> np.ndarray | None:
@@ -226,17 +237,36 @@ class Simulator:
 
     def _batch_steps(self, until: float, dt: float) -> int:
         """How many whole steps ``dt`` towards ``until`` may run in one call (0: step by step).
-        One step short of ``until``: the last, maybe shortened one, goes step by step."""
-        if self._dynamic is None or self._steady_lam() is None or not self._dynamic.fast.batches(self.state.t):
+        One step short of ``until``: the last, maybe shortened one, goes step by step. Servos
+        advance in Python at every step: their runs go step by step."""
+        if self._dynamic is None or self._servo is not None or not self._dynamic.fast.batches(self.state.t):
             return 0
         count = int((until - self.state.t) / dt) - 1
+        if self._steady_lam() is None:       # the scene's commands: their lengths tabulated
+            count = min(count, TABLE_STEPS)
         return count if count >= 2 else 0
+
+    def _command_table(self, count: int, dt: float) -> np.ndarray:
+        """``(count, na)``: the stretches that :meth:`step` would command in each of the next
+        ``count`` steps ``dt`` (the same times, calls and divisions)."""
+        if self._lam_table is None:
+            self._lam_table = np.zeros((TABLE_STEPS, self._lengths.size))
+        table = self._lam_table[:count]
+        l0 = self.model.actuators.l0
+        t = self.state.t
+        for k in range(count):       # t advances as the step advances it: t_n + dt
+            t = t + dt
+            np.divide(self.command_lengths(t), l0, out=table[k])
+        return table
 
     def _run_batch(self, count: int, dt: float) -> None:
         """Up to ``count`` steps ``dt`` in one call (:meth:`DynamicIntegrator.steps`), counted as
         :meth:`step` counts them."""
+        lam = self._steady_lam()
+        if lam is None:
+            lam = self._command_table(count, dt)
         t0 = time.perf_counter()
-        done, res, tally, settled = self._dynamic.steps(self.state, dt, self._steady_lam(), count)
+        done, res, tally, settled = self._dynamic.steps(self.state, dt, lam, count)
         self.stats.wall_time_s += time.perf_counter() - t0
         st = self.stats
         st.steps += done

@@ -165,18 +165,18 @@ class DynamicIntegrator:
 
     def steps(self, state: State, dt: float, lam_new: np.ndarray,
               count: int) -> tuple[int, StepResult, np.ndarray, bool]:
-        """Up to ``count`` steps ``dt`` to the same stretches ``lam_new`` (no rates given) in one
-        numba call, where the integrator's numba step batches them
-        (:meth:`~.fast.NumbaStep.batches`): what as many :meth:`step` calls would give. Stops
-        after the first step that fails its attempt, which the policy then settles as :meth:`step`
-        does. Returns the steps the numba call accepted, the last step's result (that settled one,
-        if any), the tally of the accepted ones (:meth:`~.fast.NumbaStep.attempts`) and whether
-        the last step was settled."""
+        """Up to ``count`` steps ``dt`` in one numba call, where the integrator's numba step
+        batches them (:meth:`~.fast.NumbaStep.batches`), to the stretches ``lam_new``: the same for
+        every step ``(na,)``, or one row per step ``(k, na)`` (no rates given): what as many
+        :meth:`step` calls would give. Stops after the first step that fails its attempt, which the
+        policy then settles as :meth:`step` does. Returns the steps the numba call accepted, the
+        last step's result (that settled one, if any), the tally of the accepted ones
+        (:meth:`~.fast.NumbaStep.attempts`) and whether the last step was settled."""
         self._check(state)
         done, res, tally = self.fast.attempts(state.t, dt, lam_new, count)
         failed = not res.converged
         if failed:
-            res = self._settle(state, dt, lam_new, res)
+            res = self._settle(state, dt, lam_new[done] if lam_new.ndim == 2 else lam_new, res)
         return done, res, tally, failed
 
     def _check(self, state: State) -> None:

@@ -404,22 +404,25 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
 
 
 @njit(cache=True, nogil=True)
-def model_steps(count, loads, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf,
-                wi, lay, io, dt, guarded, tally):
+def model_steps(count, loads, lams, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf,
+                ci, wf, wi, lay, io, dt, guarded, tally):
     """Up to ``count`` steps of :func:`model_step` (same arguments), one after the other at the
-    same stretches and driven supports; stops at the first that fails, which leaves the state at
-    its start as :func:`model_step` does. ``loads (count, ndof)``: the loads ``f_ext`` of each step
-    (N), copied in before it; ``(0, ndof)``: ``f_ext`` as it is, for every step. ``tally (4,)``
+    same driven supports; stops at the first that fails, which leaves the state at its start as
+    :func:`model_step` does. ``loads (count, ndof)``: the loads ``f_ext`` of each step (N), copied
+    in before it; ``(0, ndof)``: ``f_ext`` as it is, for every step. ``lams (count, na)``: the
+    actuator stretches λ_{n+1} of each step; ``(0, na)``: ``lam_new`` for every step. ``tally (4,)``
     out: steps accepted, their Newton iterations summed, the most in one step, the largest
     relative residual. ``io`` holds the last attempt's outputs. Returns the last attempt's code."""
     code = OK
     tally[:] = 0.0
     tabulated = loads.shape[0] > 0
+    commanded = lams.shape[0] > 0
     for k in range(count):
         if tabulated:
             for i in range(f_ext.size):
                 f_ext[i] = loads[k, i]
-        code = model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi,
+        lam_k = lams[k] if commanded else lam_new
+        code = model_step(d, dlay, lam_k, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi,
                           lay, io, dt, guarded)
         if code != OK:
             break
@@ -507,6 +510,7 @@ class NumbaStep:
         self._batchable = self.packs._q_drive is None and not par[P_KEEP]
         self._tabulable = self._batchable and not (mo.follower_signals or mo.cons_signals)
         self._no_table = np.zeros((0, m.ndof))
+        self._no_lams = np.zeros((0, na))
         self._table: np.ndarray | None = None        # (TABLE_STEPS, ndof), on first use
 
     def invalidate(self) -> None:
@@ -559,13 +563,18 @@ class NumbaStep:
         return self._tabulable or self.steady(t)
 
     def attempts(self, t: float, dt: float, lam_new: np.ndarray, count: int) -> tuple[int, StepResult, np.ndarray]:
-        """Attempts of steps ``dt`` from ``t`` (the time of the integrator's step data, s) to the
-        stretches ``lam_new`` in one numba call (:func:`model_steps`) where :meth:`batches`: up
-        to ``count``, and up to :data:`TABLE_STEPS` while the loads change, whose ``f_ext`` of each
-        step is formed first, as :meth:`attempt` would form it. The same arithmetic as as many
-        calls of :meth:`attempt`. Returns the steps accepted, the last attempt's result (a
-        failure leaves the state at that step's start) and the tally ``[steps, iterations, most
-        iterations in a step, largest relative residual]`` of the accepted ones."""
+        """Attempts of steps ``dt`` from ``t`` (the time of the integrator's step data, s) in one
+        numba call (:func:`model_steps`) where :meth:`batches`: up to ``count``, and up to
+        :data:`TABLE_STEPS` while the loads change, whose ``f_ext`` of each step is formed first,
+        as :meth:`attempt` would form it. ``lam_new``: the stretches of every step ``(na,)``, or of
+        each step ``(k, na)`` (then at most k steps). The same arithmetic as as many calls of
+        :meth:`attempt`. Returns the steps accepted, the last attempt's result (a failure leaves the
+        state at that step's start) and the tally ``[steps, iterations, most iterations in a step,
+        largest relative residual]`` of the accepted ones."""
+        lams = self._no_lams
+        if lam_new.ndim == 2:
+            lams, lam_new = lam_new, lam_new[0]
+            count = min(count, lams.shape[0])
         table = self._no_table
         if not self.steady(t):
             count = min(count, TABLE_STEPS)
@@ -580,8 +589,8 @@ class NumbaStep:
                 t = t_new
         d, dlay, f_ext, r, env, inv_diag, stats = self._shared
         cf, ci, wf, wi = self._packs
-        code = model_steps(count, table, d, dlay, lam_new, self._no_rate, False, f_ext, r, env, inv_diag, stats, cf, ci,
-                           wf, wi, self._lay, self._io, dt, self.integ.guard.enabled, self._tally)
+        code = model_steps(count, table, lams, d, dlay, lam_new, self._no_rate, False, f_ext, r, env, inv_diag, stats,
+                           cf, ci, wf, wi, self._lay, self._io, dt, self.integ.guard.enabled, self._tally)
         done = int(self._tally[0])
         if table.shape[0] and done < count:
             self.invalidate()           # the loads were formed for steps that did not run
