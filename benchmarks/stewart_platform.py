@@ -496,7 +496,9 @@ def write_markdown(path: Path, rows, ref, conv, cheapest, cheapest_1ms, transien
              f"{INTEGRATOR_NAMES.get(sv['integrator'], sv['integrator'])} ρ∞ = {sv['rho_inf']:g}, {sv['newton']} Newton, "
              f"tolerance {_num(sv['tolerance'])}; commands from the appendix program at every step; the run starts from "
              "the static equilibrium.", "",
-             f"Wall time = `Simulator.run` only (JIT warm-up and initialization excluded), {meta['repeat_rule']}. "
+             f"Wall time = `Simulator.run` only (JIT warm-up and initialization excluded), {meta['repeat_rule']}: "
+             "the program's lengths are evaluated in Python at every step, 256 steps ahead, and the steps between two "
+             "marks run in one numba call (`Simulator.run(..., every=K)`; bit for bit the step-by-step run). "
              "RTF = simulated time / wall time. Deviations are maxima over the 10 ms marks (20 ms for Δt = 4 ms) over "
              f"0–{T:g} s against the **converged reference** — {ref['label']}, Δt = {ref['dt'] * 1e3:g} ms, Newton "
              f"tolerance {_num(ref['tolerance'])} — at identical times: platform centroid (m), platform orientation angle "
