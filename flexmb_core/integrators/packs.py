@@ -56,7 +56,7 @@ from .views import c_view2, c_view3, c_view4
  F_STRAIGHT, F_BLOCKS,                                                                        # wi
  NF) = range(36)
 # Items of one shell group (rows S0 + k·NS + item).
-S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, NS = range(9)
+S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, S_CONST, NS = range(10)
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
  P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, P_MBLOCK,
@@ -271,7 +271,8 @@ def assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdat
         b = s0 + k * NS
         strain += shell_group(q, view2(ci, lay[b + S_EDOFS]), view2(cf, lay[b + S_PHI]), view3(cf, lay[b + S_DPHI]),
                               view1(cf, lay[b + S_ZETA]), view4(cf, lay[b + S_A0INV]), view2(cf, lay[b + S_W]),
-                              view2(cf, lay[b + S_MAT]), view2(ci, lay[b + S_SMAP]), refresh, r, kdata,
+                              view2(cf, lay[b + S_MAT]), view3(cf, lay[b + S_CONST]), view2(ci, lay[b + S_SMAP]),
+                              refresh, r, kdata,
                               view2(wf, lay[L_SDV]), view3(wf, lay[L_SDFA]), view2(wf, lay[L_SF]), view2(wf, lay[L_SBMAT]),
                               view2(wf, lay[L_SCB]), view1(wf, lay[L_SQE]), view1(wf, lay[L_SRE]), view2(wf, lay[L_SKE]))
     rc = view1(wf, lay[L_RC])
@@ -463,7 +464,7 @@ class ModelPacks:
         for k, g in enumerate(m.shell_groups):
             b = N_ITEMS + nfg * NF + k * NS
             for item, arr in ((S_PHI, g.phi), (S_DPHI, g.dphi), (S_ZETA, g.zeta), (S_A0INV, g.a0inv), (S_W, g.w),
-                              (S_MAT, g.mat)):
+                              (S_MAT, g.mat), (S_CONST, g.const)):
                 cf.add(b + item, arr)
             ci.add(b + S_EDOFS, g.edofs)
             ci.add(b + S_SMAP, g.smap)

@@ -50,12 +50,15 @@ below the cubic interpolation — adds no zero-energy mode (P₁ would add 4).
 Kernel structure. The kernel sums the points through the thickness in 21 node-independent
 "virtual" unknowns and spreads them over the 70 once per in-plane point (:func:`shell_element`,
 Notes). The projection couples the in-plane points, so the element takes three passes: strains
-(:func:`_strains`, then :func:`_project`), stresses of E* (:func:`_stresses`, then
-:func:`_back_project`: the effective stress S + ΔS whose work on δE equals the work of S* on δE*),
+(:func:`_strains`, then :func:`_l2`), stresses of E* (:func:`_stresses`, then :func:`_l2`'s adjoint:
+the effective stress S + ΔS whose work on δE equals the work of S* on δE*),
 and the residual/tangent pass of the raw kernel with the effective stress, plus the tangent's
 projected parts: per in-plane point within its 21 virtual unknowns, and a rank-21 update over the
 projected modes (:func:`_coupled_update`). ``mat`` carries the correction weights (γ_m = 1 − s for
-the membrane, γ_s = 1 for the shear): with both 0 the kernel is the unprojected element.
+the membrane, γ_s = 1 for the shear): with both 0 the kernel is the unprojected element. What does
+not depend on the state — the in-plane bases and weights, A⁰ at every point, the Gram inverses of
+the projections — is computed once per model (:func:`shell_constants`, by the same functions the
+kernel once called at every evaluation: the same numbers) and read by every evaluation.
 """
 
 from __future__ import annotations
@@ -115,6 +118,11 @@ C_W = C_CM + NMODE
 C_MS = C_W + NMODE
 C_YS = C_MS + NC
 N_CBROW = C_YS + NC
+# Rows of an element's constants table (shell_constants, 9 columns): the in-plane point count, the
+# P1 Gram inverse (3 × 3), the P2 one (6 × 6 over 4 rows), then one row per in-plane point (ψ, Ω,
+# its run p0, p1) and one per point (A⁰, row-major).
+C_NIP, C_GRAM1, C_GRAM2, C_IPC = 0, 1, 2, 6
+IP_CONST = (IP_PSI, IP_PSI + 1, IP_PSI + 2, IP_PSI + 3, IP_PSI + 4, IP_PSI + 5, IP_OM, IP_P0, IP_P1)
 
 
 @njit(cache=True)
@@ -190,17 +198,15 @@ def _run_end(phi, dphi, p0):
 
 
 @njit(cache=True)
-def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f):
-    """Pass 1: F, E = ½(FᵀF − I) and A⁰ = ((A⁰)⁻¹)⁻¹ of every point into its ``f`` row; per in-plane
-    point i the basis ψ = (1, x, y, x², xy, y²) (x = ξ1 − ⅓, y = ξ2 − ⅓), Ω = Σ w, the thickness
-    mean m of Ê11, Ê22, Ê12, Ê13, Ê23 (weights w/Ω) and its run of points. Returns the number of
-    in-plane points."""
+def _constants(phi, dphi, w, a0inv, f):
+    """The state-independent part of pass 1, into ``f``: per in-plane point i the basis ψ = (1, x, y,
+    x², xy, y²) (x = ξ1 − ⅓, y = ξ2 − ⅓), Ω = Σ w and its run of points through the thickness; per
+    point A⁰ = ((A⁰)⁻¹)⁻¹ (cofactors: Ê = A⁰ᵀ E A⁰ needs it). Returns the number of in-plane points."""
     npt = w.shape[0]
     nip = npt * 0
     p0 = npt * 0
     while p0 < npt:
         p1 = _run_end(phi, dphi, p0)
-        fl = _fields(qe, phi, dphi, p0)
         r = F_IP + nip
         x = -1.0 / 3.0
         y = -1.0 / 3.0
@@ -217,29 +223,10 @@ def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f):
         for p in range(p0, p1):
             om += w[p]
         f[r, IP_OM] = om
-        for c in range(NC):
-            f[r, IP_M + c] = 0.0
         f[r, IP_P0] = p0
         f[r, IP_P1] = p1
         for p in range(p0, p1):
-            _deformation(fl, zeta[p], hh, a0inv, p, f)
             row = F_PT + p
-            for i in range(3):
-                for j in range(3):
-                    f[row, PT_F + 3 * i + j] = f[i, j]
-            e00 = 0.5 * (f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0] - 1.0)
-            e11 = 0.5 * (f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1] - 1.0)
-            e22 = 0.5 * (f[0, 2] * f[0, 2] + f[1, 2] * f[1, 2] + f[2, 2] * f[2, 2] - 1.0)
-            e01 = 0.5 * (f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1])
-            e02 = 0.5 * (f[0, 0] * f[0, 2] + f[1, 0] * f[1, 2] + f[2, 0] * f[2, 2])
-            e12 = 0.5 * (f[0, 1] * f[0, 2] + f[1, 1] * f[1, 2] + f[2, 1] * f[2, 2])
-            f[row, PT_E] = e00
-            f[row, PT_E + 1] = e11
-            f[row, PT_E + 2] = e22
-            f[row, PT_E + 3] = e01
-            f[row, PT_E + 4] = e02
-            f[row, PT_E + 5] = e12
-            # A⁰ from (A⁰)⁻¹ (cofactors): Ê = A⁰ᵀ E A⁰ needs it.
             m00 = a0inv[p, 0, 0]; m01 = a0inv[p, 0, 1]; m02 = a0inv[p, 0, 2]
             m10 = a0inv[p, 1, 0]; m11 = a0inv[p, 1, 1]; m12 = a0inv[p, 1, 2]
             m20 = a0inv[p, 2, 0]; m21 = a0inv[p, 2, 1]; m22 = a0inv[p, 2, 2]
@@ -258,6 +245,101 @@ def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f):
             f[row, a + 6] = (m10 * m21 - m11 * m20) * inv
             f[row, a + 7] = (m01 * m20 - m00 * m21) * inv
             f[row, a + 8] = (m00 * m11 - m01 * m10) * inv
+        nip += 1
+        p0 = p1
+    return nip
+
+
+@njit(cache=True)
+def shell_constants(phi, dphi, zeta, a0inv, w, const):
+    """The state-independent numbers of one element's passes, once per model (:func:`shell_element`
+    reads them instead of computing them at every call): ``const (6 + nip + npt, 9)`` (its rows: see
+    :func:`const_rows`) gets the in-plane point count, the inverted Gram matrices of P1 and P2, per
+    in-plane point ψ, Ω and its run of points, per point A⁰ — computed by the very functions the
+    kernel used to call at every evaluation, so the kernel's arithmetic is unchanged. Returns nip,
+    or −1 (nothing written) when ``const`` has too few rows for it."""
+    f = np.zeros((N_FROW, N_FCOL))
+    bmat = np.zeros((N_BROW, NV))
+    nip = _constants(phi, dphi, w, a0inv, f)
+    if const.shape[0] < C_IPC + nip + w.shape[0]:
+        return -1
+    _invert_grams(f, bmat, nip)
+    const[:, :] = 0.0
+    const[C_NIP, 0] = nip
+    for k in range(NM_M):
+        for l in range(NM_M):
+            const[C_GRAM1, NM_M * k + l] = bmat[B_MI1 + k, l]
+    for k in range(NM_S):
+        for l in range(NM_S):
+            i = NM_S * k + l
+            const[C_GRAM2 + i // 9, i % 9] = bmat[B_MI2 + k, l]
+    for i in range(nip):
+        for c in range(9):
+            const[C_IPC + i, c] = f[F_IP + i, IP_CONST[c]]      # ψ (6), Ω, p0, p1
+    for p in range(w.shape[0]):
+        for c in range(9):
+            const[C_IPC + nip + p, c] = f[F_PT + p, PT_A + c]
+    return nip
+
+
+@njit(cache=True)
+def _load_constants(const, npt, f, bmat):
+    """:func:`shell_constants`' numbers back into the scratch rows the passes read; returns nip."""
+    nip = int(const[C_NIP, 0])
+    for k in range(NM_M):
+        for l in range(NM_M):
+            bmat[B_MI1 + k, l] = const[C_GRAM1, NM_M * k + l]
+    for k in range(NM_S):
+        for l in range(NM_S):
+            i = NM_S * k + l
+            bmat[B_MI2 + k, l] = const[C_GRAM2 + i // 9, i % 9]
+    for i in range(nip):
+        for c in range(9):
+            f[F_IP + i, IP_CONST[c]] = const[C_IPC + i, c]
+    for p in range(npt):
+        for c in range(9):
+            f[F_PT + p, PT_A + c] = const[C_IPC + nip + p, c]
+    return nip
+
+
+def const_rows(nip: int, npt: int) -> int:
+    """Rows of an element's :func:`shell_constants` table: the count, the P1 Gram inverse (9), the P2
+    one (36, 4 rows), one per in-plane point, one per point."""
+    return C_IPC + nip + npt
+
+
+@njit(cache=True)
+def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f, nip):
+    """Pass 1: F and E = ½(FᵀF − I) of every point into its ``f`` row and per in-plane point the
+    thickness mean m of Ê11, Ê22, Ê12, Ê13, Ê23 (weights w/Ω), from the constants
+    :func:`_load_constants` put in ``f`` (ψ, Ω, the runs, A⁰)."""
+    for i in range(nip):
+        r = F_IP + i
+        p0 = int(f[r, IP_P0])
+        p1 = int(f[r, IP_P1])
+        om = f[r, IP_OM]
+        fl = _fields(qe, phi, dphi, p0)
+        for c in range(NC):
+            f[r, IP_M + c] = 0.0
+        for p in range(p0, p1):
+            _deformation(fl, zeta[p], hh, a0inv, p, f)
+            row = F_PT + p
+            for i3 in range(3):
+                for j in range(3):
+                    f[row, PT_F + 3 * i3 + j] = f[i3, j]
+            e00 = 0.5 * (f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0] - 1.0)
+            e11 = 0.5 * (f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1] - 1.0)
+            e22 = 0.5 * (f[0, 2] * f[0, 2] + f[1, 2] * f[1, 2] + f[2, 2] * f[2, 2] - 1.0)
+            e01 = 0.5 * (f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1])
+            e02 = 0.5 * (f[0, 0] * f[0, 2] + f[1, 0] * f[1, 2] + f[2, 0] * f[2, 2])
+            e12 = 0.5 * (f[0, 1] * f[0, 2] + f[1, 1] * f[1, 2] + f[2, 1] * f[2, 2])
+            f[row, PT_E] = e00
+            f[row, PT_E + 1] = e11
+            f[row, PT_E + 2] = e22
+            f[row, PT_E + 3] = e01
+            f[row, PT_E + 4] = e02
+            f[row, PT_E + 5] = e12
+            a = PT_A
             wm = w[p] / om
             for c in range(NC):
                 ca = COMP_A[c]
@@ -270,9 +352,6 @@ def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f):
                 eb1 = e01 * b0 + e11 * b1 + e12 * b2
                 eb2 = e02 * b0 + e12 * b1 + e22 * b2
                 f[r, IP_M + c] += wm * (f[row, a + ca] * eb0 + f[row, a + 3 + ca] * eb1 + f[row, a + 6 + ca] * eb2)
-        nip += 1
-        p0 = p1
-    return nip
 
 
 @njit(cache=True)
@@ -602,7 +681,7 @@ def _spread_batch(cb, ke):
 
 
 @njit(cache=True)
-def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, cb, re, ke):
+def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, const, want_k, dv, dfa, f, bmat, cb, re, ke):
     """Residual, tangent and strain energy of one positional shell element (assumed strains E*).
 
     Parameters
@@ -615,6 +694,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
     w : (npt,) float64 — reference volume weights W·det A⁰ (m³).
     mat : (5,) float64 — Lamé λ, μ (Pa), the half thickness h = h0/2 (m) and the correction
         weights γ_m = 1 − s (membrane) and γ_s (transverse shear) of the assumed strains (–).
+    const : (6 + nip + npt, 9) float64 — the element's :func:`shell_constants`.
     want_k : bool — also compute the tangent.
     dv, dfa, f, bmat, cb : scratch of :func:`shell_scratch` (row roles: ``D_*``, ``F_*``/``PT_*``/
         ``IP_*``, ``B_*``, ``C_*``).
@@ -659,8 +739,8 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
             for c in range(NV):
                 bmat[r, c] = 0.0
     # Passes 1 and 2: strains, their projection, the stresses of E* and the adjoint projection.
-    nip = _strains(qe, phi, dphi, zeta, a0inv, w, hh, f)
-    _invert_grams(f, bmat, nip)
+    nip = _load_constants(const, w.shape[0], f, bmat)
+    _strains(qe, phi, dphi, zeta, a0inv, w, hh, f, nip)
     _l2(f, bmat, nip, gm, gs, nip < 0)
     energy = _stresses(a0inv, w, lam_l, mu, f, nip)
     _l2(f, bmat, nip, gm, gs, nip >= 0)
@@ -920,19 +1000,20 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, want_k, dv, dfa, f, bmat, 
 
 
 @njit(cache=True)
-def shell_group(q, edofs, phi, dphi, zeta, a0inv, w, mat, smap, want_k, r, kdata, dv, dfa, f, bmat, cb,
+def shell_group(q, edofs, phi, dphi, zeta, a0inv, w, mat, const, smap, want_k, r, kdata, dv, dfa, f, bmat, cb,
                 qe, re, ke):
     """Loop over one shell group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.
 
     ``edofs (ne, 70)`` global DOF ids; ``a0inv (ne, npt, 3, 3)``, ``w (ne, npt)``, ``mat (ne, 5)``;
-    ``smap (ne, 4900)`` CSR position of each local entry (−1: prescribed). Returns the strain energy (J).
+    ``const (ne, 6 + nip + npt, 9)`` the elements' :func:`shell_constants`; ``smap (ne, 4900)`` CSR
+    position of each local entry (−1: prescribed). Returns the strain energy (J).
     """
     energy = 0.0
     for e in range(edofs.shape[0]):
         for i in range(NLOC):
             qe[i] = q[edofs[e, i]]
-        energy += shell_element(qe, phi, dphi, zeta, a0inv[e], w[e], mat[e], want_k, dv, dfa, f, bmat, cb,
-                                re, ke)
+        energy += shell_element(qe, phi, dphi, zeta, a0inv[e], w[e], mat[e], const[e], want_k, dv, dfa, f, bmat,
+                                cb, re, ke)
         for i in range(NLOC):
             r[edofs[e, i]] += re[i]
         if want_k:

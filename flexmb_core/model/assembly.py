@@ -98,7 +98,7 @@ def assemble(model: Model, ws: Workspace, q: np.ndarray, lam: np.ndarray, want_k
         energy += u
         diss += dp
     for g in model.shell_groups:
-        energy += shell_group(q, g.edofs, g.phi, g.dphi, g.zeta, g.a0inv, g.w, g.mat, g.smap, want_k, ws.r,
+        energy += shell_group(q, g.edofs, g.phi, g.dphi, g.zeta, g.a0inv, g.w, g.mat, g.const, g.smap, want_k, ws.r,
                               ws.kdata, *ws.shell_scratch)
     ws.dissipation = diss
     assemble_constraints(model, ws, q, ws.no_mult if mult is None else mult, want_k)

@@ -62,7 +62,9 @@ class ShellGroup:
     ``quadrature`` (n, n_ζ); rule arrays shared by the group: ``phi (npt, 10)``, ``dphi (npt, 10, 2)``,
     ``zeta (npt,)``; per element: ``edofs (ne, 70)`` [Y, G, a] per node, ``a0inv (ne, npt, 3, 3)``,
     ``w (ne, npt)`` (m³), ``mat (ne, 5)`` [λ, μ (Pa), h0/2 (m), the assumed-strain weights γ_m, γ_s
-    (:mod:`flexmb_core.kernels.shell`)], ``smap (ne, 4900)``.
+    (:mod:`flexmb_core.kernels.shell`)], ``const (ne, 6 + nip + npt, 9)`` the state-independent
+    numbers of each element's kernel (:func:`~flexmb_core.kernels.shell.shell_constants`),
+    ``smap (ne, 4900)``.
     """
 
     quadrature: tuple[int, int]
@@ -73,6 +75,7 @@ class ShellGroup:
     a0inv: np.ndarray
     w: np.ndarray
     mat: np.ndarray
+    const: np.ndarray
     smap: np.ndarray
 
     @property

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..kernels.shell import N_SMAT, SMAT_GM, SMAT_GS, SMAT_H, SMAT_LAMBDA, SMAT_MU
+from ..kernels.shell import N_SMAT, SMAT_GM, SMAT_GS, SMAT_H, SMAT_LAMBDA, SMAT_MU, const_rows, shell_constants
 from ..scene.schema import Scene, Shell
 from . import shell_mesh
 from .model import ShellGroup, ShellInfo
@@ -234,14 +234,33 @@ def build_shell_groups(scene: Scene, infos: tuple[ShellInfo, ...], scatter_map,
     for quad, b in sorted(build.items()):
         phi, dphi, zeta, _ = rules[quad]
         edofs = np.asarray(b["edofs"], dtype=np.int64)
-        g = ShellGroup(quad, edofs, np.ascontiguousarray(phi), np.ascontiguousarray(dphi), np.ascontiguousarray(zeta),
-                       np.ascontiguousarray(b["a0inv"]), np.ascontiguousarray(b["w"]),
-                       np.ascontiguousarray(b["mat"], dtype=float),
+        phi, dphi, zeta = np.ascontiguousarray(phi), np.ascontiguousarray(dphi), np.ascontiguousarray(zeta)
+        a0inv, w = np.ascontiguousarray(b["a0inv"]), np.ascontiguousarray(b["w"])
+        for a in (phi, dphi, zeta, a0inv, w):
+            a.setflags(write=False)     # read-only, as the kernels see them: one signature each
+        g = ShellGroup(quad, edofs, phi, dphi, zeta, a0inv, w, np.ascontiguousarray(b["mat"], dtype=float),
+                       element_constants(phi, dphi, zeta, a0inv, w, quad[1]),
                        np.ascontiguousarray([scatter_map(ed) for ed in edofs], dtype=np.int64))
-        for a in (g.edofs, g.phi, g.dphi, g.zeta, g.a0inv, g.w, g.mat, g.smap):
+        for a in (g.edofs, g.phi, g.dphi, g.zeta, g.a0inv, g.w, g.mat, g.const, g.smap):
             a.setflags(write=False)
         groups.append(g)
     return tuple(groups)
+
+
+def element_constants(phi: np.ndarray, dphi: np.ndarray, zeta: np.ndarray, a0inv: np.ndarray, w: np.ndarray,
+                      n_thickness: int) -> np.ndarray:
+    """``(ne, rows, 9)``: each element's :func:`~flexmb_core.kernels.shell.shell_constants` (the
+    rule's ``phi, dphi, zeta`` with ``n_thickness`` points through the thickness at each in-plane
+    point, consecutive; per element ``a0inv (ne, npt, 3, 3)``, ``w (ne, npt)``)."""
+    ne, npt = w.shape
+    nip = npt // n_thickness
+    out = np.zeros((ne, const_rows(nip, npt), 9))
+    for e in range(ne):
+        got = shell_constants(phi, dphi, zeta, np.ascontiguousarray(a0inv[e]), np.ascontiguousarray(w[e]), out[e])
+        if got != nip:      # shell_rule orders the points by in-plane point: a broken rule, not a scene's fault
+            raise RuntimeError(f"shell rule: {got} runs of in-plane points, expected {nip} ({npt} points, "
+                               f"{n_thickness} through the thickness)")
+    return out
 
 
 def shell_element_pairs(infos: tuple[ShellInfo, ...]) -> list[np.ndarray]:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from flexmb_core.kernels.shell import NDOF_NODE, NLOC, shell_element, shell_scratch
+from flexmb_core.kernels.shell import NDOF_NODE, NLOC, const_rows, shell_constants, shell_element, shell_scratch
 from flexmb_core.model.shell_geometry import (LOCAL_NODES_3L, MEMBRANE_ALPHA, cubic_triangle, membrane_weight,
                                               shell_element_geometry,
                                               shell_element_mass, shell_rule, triangle_rule)
@@ -94,7 +94,10 @@ def _eval(q, geo, want_k=True):
     dv, dfa, f, bm, cb, _, re, ke = sc
     # the compiled model's geometry arrays are read-only: call the kernel with the same signature
     # (tests/unit/test_signatures.py: one signature per kernel in one process)
-    u = shell_element(q, *(_frozen(g) for g in geo), want_k, dv, dfa, f, bm, cb, re, ke)
+    phi, dphi, zeta, a0inv, w, mat = (_frozen(g) for g in geo)
+    const = np.zeros((const_rows(w.size, w.size), 9))      # rows for as many in-plane points as points
+    assert shell_constants(phi, dphi, zeta, a0inv, w, const) > 0
+    u = shell_element(q, phi, dphi, zeta, a0inv, w, mat, _frozen(const), want_k, dv, dfa, f, bm, cb, re, ke)
     return u, re.copy(), ke.copy()
 
 
