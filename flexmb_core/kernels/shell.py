@@ -105,7 +105,8 @@ F_IP = F_PT + NPT_MAX
 N_FROW = F_IP + IN_PLANE_MAX
 PT_F, PT_E, PT_A, PT_S = 0, 9, 15, 24
 IP_PSI, IP_OM, IP_M, IP_D, IP_T, IP_U, IP_P0, IP_P1 = 0, 6, 7, 12, 17, 22, 27, 28
-N_FCOL = 30
+IP_FL = 30          # the in-plane point's fields (y,1 y,2 g g,1 g,2 a a,1 a,2: 18), kept by pass 1
+N_FCOL = IP_FL + 18
 # bmat (21 columns): the point's ∂m/∂v (Mv), Lᵀ w C B (Z), Z − Q γ Mv (Y), the modes' G, the Gram
 # inverses, Q = Σ w Lᵀ C L, and the point's L (E from ΔÊ) and R (Ê from E) in Voigt form.
 B_MV, B_Z, B_Y, B_G = 27, 32, 37, 42
@@ -319,6 +320,8 @@ def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f, nip):
         p1 = int(f[r, IP_P1])
         om = f[r, IP_OM]
         fl = _fields(qe, phi, dphi, p0)
+        for k in range(18):
+            f[r, IP_FL + k] = fl[k]
         for c in range(NC):
             f[r, IP_M + c] = 0.0
         for p in range(p0, p1):
@@ -756,9 +759,14 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, const, want_k, dv, dfa, f,
         u01 = 0.5 * f[r_ip, IP_U + 2] / om
         u02 = 0.5 * f[r_ip, IP_U + 3] / om
         u12 = 0.5 * f[r_ip, IP_U + 4] / om
-        # Interpolated fields (independent of ζ): y,1 y,2; g g,1 g,2; a a,1 a,2.
-        fl = _fields(qe, phi, dphi, p0)
-        y1x, y1y, y1z, y2x, y2y, y2z, gx, gy, gz, g1x, g1y, g1z, g2x, g2y, g2z, aa, a1, a2 = fl
+        # Interpolated fields (independent of ζ): y,1 y,2; g g,1 g,2; a a,1 a,2, as pass 1 kept them.
+        fr = f[r_ip]
+        y1x = fr[IP_FL]; y1y = fr[IP_FL + 1]; y1z = fr[IP_FL + 2]
+        y2x = fr[IP_FL + 3]; y2y = fr[IP_FL + 4]; y2z = fr[IP_FL + 5]
+        gx = fr[IP_FL + 6]; gy = fr[IP_FL + 7]; gz = fr[IP_FL + 8]
+        g1x = fr[IP_FL + 9]; g1y = fr[IP_FL + 10]; g1z = fr[IP_FL + 11]
+        g2x = fr[IP_FL + 12]; g2y = fr[IP_FL + 13]; g2z = fr[IP_FL + 14]
+        aa = fr[IP_FL + 15]; a1 = fr[IP_FL + 16]; a2 = fr[IP_FL + 17]
         for i in range(F_NY, F_RV):
             f[i, 0] = 0.0
             f[i, 1] = 0.0
@@ -1025,8 +1033,8 @@ def shell_scratch() -> tuple[np.ndarray, ...]:
     """Scratch buffers for :func:`shell_group` (allocated once per model): dv, dfa, f, bmat, cb, qe, re, ke.
 
     ``dv (20, 3)`` virtual d_k, w S d_k, g g,1 g,2 and N; ``dfa (10, 3, 3)`` virtual ∂F/∂a and
-    w ∂F/∂a S; ``f (463, 30)`` F, the thickness moments of N and r_v, then per point F, E, A⁰, S* and
-    per in-plane point ψ, Ω, m, D, T, U (up to 8 × 8 × 6 points); ``bmat (88, 21)`` Voigt B, H and the
+    w ∂F/∂a S; ``f (463, 48)`` F, the thickness moments of N and r_v, then per point F, E, A⁰, S* and
+    per in-plane point ψ, Ω, m, D, T, U, its run and its fields (up to 8 × 8 × 6 points); ``bmat (88, 21)`` Voigt B, H and the
     projection's Mv, Z, Y, G, Gram inverses, Q, L, R; ``cb (154, 70)`` w C B, the batch's T and s_ℓ,
     ∂c, W, Mv S and Y S; ``qe, re (70,)``; ``ke (70, 70)``.
     """
