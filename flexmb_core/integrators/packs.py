@@ -52,9 +52,9 @@ from .views import c_view2, c_view3, c_view4
 (F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
  F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
  F_PHIST, F_DPHIST, F_SPT, F_HACC, F_GACC, F_TK, F_TG, F_D, F_FP, F_FD, F_EP, F_ED, F_BMAT, F_BDOT, F_GBAR,
- F_GDOT, F_QE, F_VE, F_RE, F_KE, F_KN, F_GPHI, F_GDPHI, F_GIDET, F_GILEN,                     # wf
+ F_GDOT, F_QE, F_VE, F_RE, F_KE, F_KN, F_GPHI, F_GDPHI, F_GIDET, F_GILEN, F_GRAM,             # wf
  F_STRAIGHT, F_BLOCKS,                                                                        # wi
- NF) = range(36)
+ NF) = range(37)
 # Items of one shell group (rows S0 + k·NS + item).
 S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, S_CONST, NS = range(10)
 # Step constants in the L_PAR block of cf.
@@ -256,7 +256,7 @@ def assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdat
                             view2(wf, lay[b + F_KE]), view2(wf, lay[b + F_KN]), view1(wi, lay[b + F_STRAIGHT]),
                             view3(wf, lay[b + F_PHIST]), view3(wf, lay[b + F_DPHIST]), view3(wf, lay[b + F_SPT]),
                             view3(wi, lay[b + F_BLOCKS]), view3(wf, lay[b + F_HACC]), view1(wf, lay[b + F_GACC]),
-                            view4(wf, lay[b + F_TK]), view2(wf, lay[b + F_TG]))
+                            view4(wf, lay[b + F_TK]), view2(wf, lay[b + F_TG]), view3(wf, lay[b + F_GRAM]))
         strain += u
         diss += dp
     t_edofs = view2(ci, lay[L_TEDOFS])
@@ -453,7 +453,7 @@ class ModelPacks:
             for item, arr in ((F_EDOFS, g.edofs), (F_ACT, g.act), (F_SMAP, g.smap), (F_NSEC, [g.nsec])):
                 ci.add(b + item, arr)
             for item, arr in ((F_PHIST, st[1]), (F_DPHIST, st[2]), (F_SPT, st[3]), (F_HACC, st[5]),
-                              (F_GACC, st[6]), (F_TK, st[7]), (F_TG, st[8])):
+                              (F_GACC, st[6]), (F_TK, st[7]), (F_TG, st[8]), (F_GRAM, st[9])):
                 wf.add(b + item, arr)
             for item, arr in zip(range(F_D, F_KN + 1), frame_scratch(g.w.shape[1], g.dax.shape[2])):
                 wf.add(b + item, arr)

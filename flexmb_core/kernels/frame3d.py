@@ -380,8 +380,40 @@ N_HACC = _SV_X + 18
 
 
 @njit(cache=True)
+def _station_gram(s_pt, w, p0, nsec, lam, gacc):
+    """Gram matrix Σ w·λ·mono_i·mono_j of the section monomials (1, s₁, s₂, s₁², s₁s₂, s₂²) over the
+    station's points ``p0 … p0 + nsec − 1`` into ``gacc[_GR:_GR + 36]`` (row-major, symmetric)."""
+    for i in range(36):
+        gacc[_GR + i] = 0.0
+    for p in range(p0, p0 + nsec):
+        s1 = s_pt[p, 0]
+        s2 = s_pt[p, 1]
+        wl = w[p] * lam
+        mo = (1.0, s1, s2, s1 * s1, s1 * s2, s2 * s2)
+        for i in range(6):
+            wi = wl * mo[i]
+            for j in range(i, 6):
+                gacc[_GR + 6 * i + j] += wi * mo[j]
+    for i in range(6):
+        for j in range(i):
+            gacc[_GR + 6 * i + j] = gacc[_GR + 6 * j + i]
+
+
+@njit(cache=True)
+def station_grams(s_pt, w, nsec, gacc, out):
+    """``out (ne, nst, 36)``: every straight element's station Gram matrices at λ = 1, once per
+    model — what :func:`straight_frame_element` computes at every call of an element at λ = 1
+    (passive elements, actuators at rest), by the same function: the same numbers."""
+    for e in range(out.shape[0]):
+        for st in range(out.shape[1]):
+            _station_gram(s_pt[e], w[e], st * nsec, nsec, 1.0, gacc)
+            for i in range(36):
+                out[e, st, i] = gacc[_GR + i]
+
+
+@njit(cache=True)
 def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam_rate, c_v, want_k, want_dlam,
-                           blocks, hacc, gacc, tk, tg, re, ke):
+                           blocks, hacc, gacc, tk, tg, gram, re, ke):
     """Residual, tangent, energy and dissipation of one straight frame element, undamped or
     Kelvin–Voigt damped, passive or actuated, from the structure of its kinematics: the same
     integrals as :func:`frame_element` (equal to round-off), in fewer operations.
@@ -412,6 +444,8 @@ def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam
     hacc : (N_HACC, 3, 3), gacc : (N_GACC,) — scratch (station accumulators, Gram matrix,
         station vectors; layout at ``_GR``, ``_SV``).
     tk : (9, 4, 3, 3), tg : (9, 4) — scratch (the accumulators combined per block kind).
+    gram : (nst, 36) — the element's station Gram matrices at λ = 1 (:func:`station_grams`), read
+        instead of summed over the section points when ``lam == 1``.
 
     Returns
     -------
@@ -450,20 +484,11 @@ def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam
     for st in range(nst):
         p0 = st * nsec
         # Gram matrix of the monomials over the station's section points (weights w·λ)
-        for i in range(36):
-            gacc[_GR + i] = 0.0
-        for p in range(p0, p0 + nsec):
-            s1 = s_pt[p, 0]
-            s2 = s_pt[p, 1]
-            wl = w[p] * lam
-            mo = (1.0, s1, s2, s1 * s1, s1 * s2, s2 * s2)
-            for i in range(6):
-                wi = wl * mo[i]
-                for j in range(i, 6):
-                    gacc[_GR + 6 * i + j] += wi * mo[j]
-        for i in range(6):
-            for j in range(i):
-                gacc[_GR + 6 * i + j] = gacc[_GR + 6 * j + i]
+        if lam == 1.0:
+            for i in range(36):
+                gacc[_GR + i] = gram[st, i]
+        else:
+            _station_gram(s_pt, w, p0, nsec, lam, gacc)
         wsum = gacc[_GR]
         # station vectors (and rates)
         for i in range(3):
@@ -812,13 +837,13 @@ def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam
 @njit(cache=True)
 def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_v, smap, want_k,
                 want_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn,
-                straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg):
+                straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg, gram):
     """Loop over one frame group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.
 
     ``v (ndof,)`` rates of the unknowns (read only for damped elements); ``edofs (ne, 9n)`` global
     DOF ids; ``act (ne,)`` actuator id or −1; ``lam_act, lam_rate`` stretch and stretch rate per
     actuator; ``smap (ne, (9n)²)`` position of each local entry in ``kdata`` (−1: prescribed).
-    ``straight … tg`` (:func:`frame_structure`): elements flagged straight (damped or not,
+    ``straight … gram`` (:func:`frame_structure`): elements flagged straight (damped or not,
     actuated or not) go through :func:`straight_frame_element`, the others (curved) through
     :func:`frame_element`.
     ``want_dlam`` must be passed in (False) rather than written as a literal: a literal constant
@@ -842,7 +867,7 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
             lrate = lam_rate[act[e]]
         if straight[e] == 1:
             u, _, de = straight_frame_element(qe, ve, phi_st[e], dphi_st[e], s_pt[e], w[e], nsec, mat[e], lam, lrate,
-                                              c_v, want_k, want_dlam, blocks, hacc, gacc, tk, tg, re, ke)
+                                              c_v, want_k, want_dlam, blocks, hacc, gacc, tk, tg, gram[e], re, ke)
         else:
             u, _, de = frame_element(qe, ve, dax[e], dsec[e], w[e], nsec, mat[e], lam, lrate, c_v, want_k,
                                      want_dlam, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, re, ke, kn)
@@ -858,7 +883,7 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
 @njit(cache=True, nogil=True)
 def frame_group_actuator_dudlam(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_v, want_k,
                                 want_dlam, out, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn,
-                                straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg):
+                                straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg, gram):
     """Accumulate dU/dλ (+ ∂D/∂λ̇ for damped elements) of every actuated element into
     ``out[actuator]`` (J), straight elements by :func:`straight_frame_element` as in
     :func:`frame_group` (the general kernel made the node's actuator forces cost more than its
@@ -879,7 +904,7 @@ def frame_group_actuator_dudlam(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_a
         if straight[e] == 1:
             _, dl, _ = straight_frame_element(qe, ve, phi_st[e], dphi_st[e], s_pt[e], w[e], nsec, mat[e],
                                               lam_act[act[e]], lam_rate[act[e]], c_v, want_k, want_dlam, blocks,
-                                              hacc, gacc, tk, tg, re, ke)
+                                              hacc, gacc, tk, tg, gram[e], re, ke)
         else:
             _, dl, _ = frame_element(qe, ve, dax[e], dsec[e], w[e], nsec, mat[e], lam_act[act[e]],
                                      lam_rate[act[e]], c_v, want_k, want_dlam, d, fp, fd, ep, ed, bmat, bdot,
@@ -901,7 +926,7 @@ def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
     """Per-group data of :func:`straight_frame_element` (computed once per model, from the
     group's own integration data): ``(straight (ne,) int64, phi_st (ne, nst, n), dphi_st (ne, nst,
     n), s_pt (ne, nip, 2), _BLOCK (18, 4, 3), hacc (N_HACC, 3, 3), gacc (N_GACC,), tk (9, 4, 3, 3),
-    tg (9, 4))``.
+    tg (9, 4), gram (ne, nst, 36))`` (``gram``: :func:`station_grams`).
 
     An element is flagged straight when its ``D̃`` has the structure of a straight element with
     constant section vectors (``d_Y = [φ'/|X'|, 0, 0]``, ``d_V1 = [s₁φ'/|X'|, φ, 0]``, ``d_V2 =
@@ -940,5 +965,8 @@ def frame_structure(g, *, structured: bool = True) -> tuple[np.ndarray, ...]:
             phi_st[e, st] = ph
             dphi_st[e, st] = dp
         straight[e] = 1 if ok else 0
-    return (straight, phi_st, dphi_st, s_pt, _BLOCK, np.zeros((N_HACC, 3, 3)), np.zeros(N_GACC),
-            np.zeros((9, 4, 3, 3)), np.zeros((9, 4)))
+    gacc = np.zeros(N_GACC)
+    gram = np.zeros((ne, nst, 36))
+    station_grams(s_pt, np.ascontiguousarray(g.w), nsec, gacc, gram)
+    return (straight, phi_st, dphi_st, s_pt, _BLOCK, np.zeros((N_HACC, 3, 3)), gacc, np.zeros((9, 4, 3, 3)),
+            np.zeros((9, 4)), gram)

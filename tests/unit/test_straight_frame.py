@@ -31,7 +31,7 @@ def _straight(g, st, sc, e, q, lam, want_k, v=None, lam_rate=0.0, c_v=0.0, want_
     re, ke = np.zeros(n), np.zeros((n, n))
     v = np.zeros(n) if v is None else v
     u, dl, dp = straight_frame_element(q, v, st[1][e], st[2][e], st[3][e], g.w[e], g.nsec, g.mat[e], lam, lam_rate,
-                                       c_v, want_k, want_dlam, st[4], st[5], st[6], st[7], st[8], re, ke)
+                                       c_v, want_k, want_dlam, st[4], st[5], st[6], st[7], st[8], st[9][e], re, ke)
     return u, re, ke, dl, dp
 
 
