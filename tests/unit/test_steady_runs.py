@@ -154,7 +154,7 @@ def test_scene_commands_run_in_batches_of_their_tabulated_lengths(name):
     assert errors == [None, None]
     _assert_same(a, b)
     assert [c[1:3] for c in calls[0][:2]] == [(256, 256), (256, 256)]
-    assert a.stats.steps == 600 and not np.array_equal(a.state.lam, a.model.actuators.l0 / a.model.actuators.l0)
+    assert a.stats.steps == 600 and np.any(a.state.lam != 1.0)      # the legs moved
 
 
 def test_a_failed_attempt_inside_a_commanded_batch_is_split_at_its_own_lengths():
