@@ -81,12 +81,17 @@ class Simulator:
         """Commanded actuator lengths (m) at ``t``: the external override if set, else the scene."""
         if self._override is not None:
             return self._override.copy()
+        return self._scene_lengths(t).copy()
+
+    def _scene_lengths(self, t: float) -> np.ndarray:
+        """The scene's commanded lengths (m) at ``t`` into the reused buffer ``_lengths`` (returned:
+        copy it to keep it)."""
         lengths = self._lengths
         for i, s in self._signal_actuators:
             lengths[i] = evaluate(s, t)
         if self.model.program is not None:
             lengths[self.model.program_index] = self.model.program.lengths(t, self._program_buf)
-        return lengths.copy()
+        return lengths
 
     def set_commands(self, lengths: np.ndarray | None, check: bool = True) -> None:
         """Hold these lengths (m, one per actuator, scene order) from now on; ``None`` → scene signals.
@@ -248,7 +253,8 @@ class Simulator:
 
     def _command_table(self, count: int, dt: float) -> np.ndarray:
         """``(count, na)``: the stretches that :meth:`step` would command in each of the next
-        ``count`` steps ``dt`` (the same times, calls and divisions)."""
+        ``count`` steps ``dt`` (the same times, calls and divisions; the scene's commands: no
+        override, see :meth:`_batch_steps`), into a table allocated once."""
         if self._lam_table is None:
             self._lam_table = np.zeros((TABLE_STEPS, self._lengths.size))
         table = self._lam_table[:count]
@@ -256,7 +262,7 @@ class Simulator:
         t = self.state.t
         for k in range(count):       # t advances as the step advances it: t_n + dt
             t = t + dt
-            np.divide(self.command_lengths(t), l0, out=table[k])
+            np.divide(self._scene_lengths(t), l0, out=table[k])
         return table
 
     def _run_batch(self, count: int, dt: float) -> None:
