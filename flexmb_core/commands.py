@@ -12,19 +12,19 @@ import numpy as np
 from numba import njit
 
 from .errors import SceneError
+from .jit import KERNEL
 from .scene.schema import CommandProgramSpec
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def hermite_row(values, rate_right, rate_left, h, t, out):
     """Cubic Hermite interpolation of a table on the uniform grid k·h (one row per grid point,
     one-sided rates per interval), held constant outside; result into ``out``."""
     n = values.shape[0]
-    if t <= 0.0:
-        out[:] = values[0]
-        return
-    if t >= (n - 1) * h:
-        out[:] = values[n - 1]
+    if t <= 0.0 or t >= (n - 1) * h:
+        k = 0 if t <= 0.0 else n - 1
+        for j in range(values.shape[1]):    # a loop, not out[:] = …: a slice copy allocates
+            out[j] = values[k, j]
         return
     i = min(int(t / h), n - 2)
     s = (t - i * h) / h

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .jit import KERNEL
 from .model.assembly import actuator_dudlam
 from .model.model import Model
 from .model.shell_compile import shell_point_node
@@ -15,7 +16,7 @@ from .model.workspace import State, Workspace
 from .scene.schema import Output
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _actuator_kinematics(q, v, end_ydofs, lengths, rates):
     """End-to-end length (m) and its rate (m/s) of every actuator, into ``lengths, rates (na,)``;
     ``end_ydofs (na, 6)`` the ids of the two end positions."""

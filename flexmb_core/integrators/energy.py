@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 from ..model.model import Model
 from ..model.workspace import State
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def csr_matvec(indptr, indices, data, x, out):
     """``out = A x`` for a CSR matrix (no allocation)."""
     for i in range(indptr.size - 1):
@@ -19,7 +20,7 @@ def csr_matvec(indptr, indices, data, x, out):
         out[i] = s
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _energies(mb, indptr, indices, data, v, q, q0, fg):
     """(½ vᵀMv, −f_g·(q − q0)) with M in block form (:func:`mass_blocks`: block size ``mb``
     1 or 3); the sums in the order of the scalar rows, whatever the block size."""
@@ -48,7 +49,7 @@ def _energies(mb, indptr, indices, data, v, q, q0, fg):
     return 0.5 * kin, gravity_potential(q, q0, fg)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def gravity_potential(q, q0, fg):
     """Gravity potential −f_g·(q − q0) (J) of the positions ``q`` (ndof,)."""
     grav = 0.0

@@ -32,6 +32,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 from ..kernels.guard import dynamic_guard, frame_orientation
 from ..model.model import Model
 from ..model.step_data import (C_T, C_T_HIST, C_T_PREV, D_A, D_ATIL, D_CLOCK, D_GVEC, D_LAM, D_LAMCAND, D_LAMHIST,
@@ -57,7 +58,7 @@ OK, NO_CONVERGENCE, NON_FINITE_RESIDUAL, NON_FINITE_INCREMENT, SINGULAR, INVERTE
  IO_OMEGA, N_IO) = range(15)
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt):
     """λ_{n+1} = ``lam_new (na,)`` into the stretches of the step data ``d`` (layout ``dlay``),
     which hold λ_n on entry, and for ``damped`` models its rate λ̇_{n+1} (1/s) into its rates:
@@ -79,7 +80,7 @@ def begin_stretches(d, dlay, lam_new, rate_new, rate_given, damped, dt):
                              rate, dt, h0, difference, damped)
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def accept_stretches(d, dlay, t_n, t_new, damped):
     """The step ``t_n → t_new`` (s) was accepted: for ``damped`` models λ_n joins the stretch
     history of the step data ``d`` (layout ``dlay``), which now belongs to the state at ``t_new``."""
@@ -93,7 +94,7 @@ def accept_stretches(d, dlay, t_n, t_new, damped):
         clock[C_T_HIST] = t_new
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf, ci, wf, wi, lay, io, dt,
                guarded):
     """First Newton attempt of one dynamic step from the time ``t_n`` of the step data (see the
@@ -403,7 +404,7 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     return OK
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def model_steps(count, loads, lams, d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, lu_stats, cf,
                 ci, wf, wi, lay, io, dt, guarded, tally):
     """Up to ``count`` steps of :func:`model_step` (same arguments), one after the other at the

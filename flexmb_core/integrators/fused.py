@@ -6,8 +6,10 @@ import math
 
 from numba import njit
 
+from ..jit import KERNEL
 
-@njit(cache=True)
+
+@njit(**KERNEL)
 def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
                       mb, m_indptr, m_indices, m_data, r_int, f_ext, free_pos, w_buf, rf, keep, g_out):
     """Free part of ``r = f_int + M (a + c_m v) − f_ext`` with a, v from the integrator formulas.
@@ -63,7 +65,7 @@ def inertial_residual(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, c_m,
     return math.sqrt(nr), max(math.sqrt(ni), math.sqrt(nm), math.sqrt(ne), 1e-300)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def apply_increment(q, free, x, sign, inv_scale):
     """``q[free] += sign·x``; returns max |x_k|·inv_scale_k (inf if any entry is not finite)."""
     inc = 0.0
@@ -78,7 +80,7 @@ def apply_increment(q, free, x, sign, inv_scale):
     return inc
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, a, v, atil):
     """Accelerations, velocities and pseudo-accelerations at the accepted q."""
     for i in range(q.size):
@@ -88,7 +90,7 @@ def update_rates(q, q_hat, at_n, a_n, v_n, c_tilde, am, af, gamma, dt, a, v, ati
         v[i] = v_n[i] + dt * ((1.0 - gamma) * at_n[i] + gamma * at)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, af, out):
     """Rates of the iterate, v(q) = v_n + Δt[(1−γ) ã_n + γ ã(q)], blended as (1−αf) v + αf v_n
     (``af`` = 0 except for the Chung–Hulbert form, which evaluates forces at t_{n+1−αf})."""
@@ -97,7 +99,7 @@ def velocity_at(q, q_hat, at_n, v_n, c_tilde, gamma, dt, af, out):
         out[i] = (1.0 - af) * v + af * v_n[i]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def stretch_rate(lam_new, lam_n, lam_prev, h1, h0, out):
     """Actuator stretch rate at t_{n+1} from the last three stretches: second-order backward
     difference on the variable grid (h1 = t_{n+1} − t_n, h0 = t_n − t_{n−1}); h0 ≤ 0 (no history)
@@ -113,7 +115,7 @@ def stretch_rate(lam_new, lam_n, lam_prev, h1, h0, out):
             out[i] = (lam_new[i] - lam_n[i]) / h1
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def advance_stretches(lam_new, lam, lam_prev, lam_cand, rate, h1, h0, difference, damped):
     """λ_{n+1} into ``lam (na,)``, which holds λ_n on entry; returns whether any actuator moves.
 

@@ -21,8 +21,9 @@ import dataclasses
 
 import numpy as np
 from numba import njit
-from numba.extending import overload, register_jitable
+from numba.extending import register_jitable
 
+from ..jit import KERNEL
 from ..kernels.constraints import director_tie_group, hinge_group, rigid_corner_group
 from ..kernels.frame3d import frame_group, frame_scratch
 from ..kernels.guard import conservative_moment_work
@@ -33,7 +34,7 @@ from ..model.assembly import apply_drives
 from ..model.model import Model, TrussGroup
 from ..solvers.banded import (BACKWARD_ERROR_TOL, STATIC_PIVOT, _factor_kernel, _refine_kernel, _solve_kernel,
                               refine_scratch)
-from .views import c_view2, c_view3, c_view4
+from .views import view1, view2, view3, view4
 
 # Items of the whole model (rows of the layout table).
 (L_DSCALE, L_Q0, L_GRAV, L_PAR, L_MV, L_TL0, L_TEA, L_TTAU, L_CALPHA, L_HALPHA, L_HBETA, L_TIEALPHA,
@@ -61,24 +62,6 @@ S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, S_CONST, NS = range
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
  P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, P_MBLOCK,
  P_CH, N_PAR) = range(27)
-# Output slots of io.
-
-
-# Views of a pack (register_jitable, overload: inlined into the caller, so that a view of a
-# read-only and of a writable pack are not two signatures of one dispatcher; callable from Python).
-@register_jitable
-def view1(p, row):
-    return p[row[0]:row[0] + row[5]]
-
-
-def view2(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2]))
-
-
-@overload(view2)
-def _view2_jit(p, row):
-    # in numba: the same view without reshape's runtime helper (.views)
-    return lambda p, row: c_view2(p, row[0], (row[1], row[2]))
 
 
 # The tangent's factorization and solve, shared by the numba steps of dynamics and statics.
@@ -211,25 +194,7 @@ def singular_note(omega: float) -> str:
             "refinement): a mechanism with a free motion needs a support")
 
 
-def view3(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3]))
-
-
-@overload(view3)
-def _view3_jit(p, row):
-    return lambda p, row: c_view3(p, row[0], (row[1], row[2], row[3]))
-
-
-def view4(p, row):
-    return p[row[0]:row[0] + row[5]].reshape((row[1], row[2], row[3], row[4]))
-
-
-@overload(view4)
-def _view4_jit(p, row):
-    return lambda p, row: c_view4(p, row[0], (row[1], row[2], row[3], row[4]))
-
-
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdata, cf, ci, wf, wi, lay, par):
     """Internal forces (+ multiplier forces, − moment loads) into ``r (ndof,)`` and their tangent
     into ``kdata (nnz,)`` when ``refresh``, in :func:`flexmb_core.model.assembly.assemble`'s order
@@ -300,7 +265,7 @@ def assemble_packed(q, v_k, lam, lam_rate, c_vk, refresh, no_dlam, mult, r, kdat
     return strain, diss
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def moment_work_packed(q, q_p, no_k, cf, ci, wf, lay):
     """Work of the moment loads from ``q_p`` to ``q`` (J), as
     :meth:`~flexmb_core.solvers.guard.StepGuard.moment_work` forms it (its follower part sums

@@ -23,6 +23,7 @@ import math
 
 from numba import njit
 
+from ..jit import KERNEL
 from ..kernels.moments import conservative_moments, follower_moments
 from .fast import NO_CONVERGENCE, NON_FINITE_INCREMENT, NON_FINITE_RESIDUAL, OK, SINGULAR
 from .packs import (L_CAXES, L_CMAG, L_DQ, L_FMBODY, L_FREE, L_FSCALE, L_FSMAP, L_FVDOFS, L_INVS, L_KDATA, L_KDUMMY,
@@ -39,7 +40,7 @@ ARC, FIXED = -1, -2
 PO_IT, PO_INC, PO_LAM, PO_DISC, PO_OMEGA, N_PO = range(6)
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def path_correct(q, lam_act, mult, f_ext, r, env, inv_diag, lu_stats, wmask, dx_acc, f_ref, s_fol0, s_cons0, rm, pt,
                  d_t, lam, dl, c2, lam_point, lam_scale, control, cf, ci, wf, wi, lay, io):
     """Corrector iterations of one increment, from the predicted ``q``, ``mult``, ``lam``.
@@ -162,7 +163,7 @@ def path_correct(q, lam_act, mult, f_ext, r, env, inv_diag, lu_stats, wmask, dx_
     return code
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def load_direction(q, f_ref, s_fol0, s_cons0, f_vdofs, f_mbody, f_smap, m_vdofs, m_axes, m_mag, m_smap, no_k, p,
                    kdummy):
     """``p = −∂R/∂λ (ndof,)`` at ``q``, into ``p``: the dead loads per unit λ ``f_ref`` minus the
@@ -180,7 +181,7 @@ def load_direction(q, f_ref, s_fol0, s_cons0, f_vdofs, f_mbody, f_smap, m_vdofs,
         p[i] = f_ref[i] - p[i]
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def _arc_root(d_r, d_t, dx, wmask, dlam_so_far, c2, dl):
     """δλ of the arc-length constraint ‖Δx + δx_R + δλ δx_t‖²_w + c2 (Δλ + δλ)² = dl²: of its two
     roots the one whose increment turns least from ``dx`` (the largest Δx·Δx_new + load term);

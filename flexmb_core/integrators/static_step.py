@@ -20,6 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 from ..kernels.guard import energy_resolution, frame_orientation
 from ..model.assembly import update_load_scales
 from ..solvers.result import StepResult
@@ -38,7 +39,7 @@ RISE = 7            # the root raised the incremental potential (guard flag 'ene
  N_SO) = range(13)
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def static_newton(q, lam, mult, f_ext, r, env, inv_diag, lu_stats, wmask, cf, ci, wf, wi, lay, io, guarded):
     """Newton on the static equilibrium at the loads ``f_ext`` and stretches ``lam`` in force,
     from ``q`` (see the module). ``q (ndof,)`` and ``mult (nmult,)`` end at the root on success

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 from numba import njit
 
+from ..jit import KERNEL
 from .scatter import scatter_matrix
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def rigid_corner_group(q, mult, dofs, alpha, smap, want_k, r, rc, kdata, ke):
     """Constraint forces into ``r`` (ndof), violations into ``rc`` (6·nc), tangent into ``kdata``.
 
@@ -75,7 +76,7 @@ def rigid_corner_group(q, mult, dofs, alpha, smap, want_k, r, rc, kdata, ke):
             scatter_matrix(smap[c], ke, kdata)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _levi(i, j, m):
     """Levi-Civita symbol ε_ijm."""
     if i == j or j == m or i == m:
@@ -85,20 +86,20 @@ def _levi(i, j, m):
     return -1.0
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _skew_mul(a, b):
     """a × b for 3-tuples/arrays."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _frame_fibre(c, v1, v2, w3):
     """Σ_j c_j W_j with W = (V1, V2, V1 × V2)."""
     return (c[0] * v1[0] + c[1] * v2[0] + c[2] * w3[0], c[0] * v1[1] + c[1] * v2[1] + c[2] * w3[1],
             c[0] * v1[2] + c[1] * v2[2] + c[2] * w3[2])
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _dfibre(c, v1, v2, which, i, j):
     """∂(Σ c W)_i / ∂V_which_j: c1 δ − c3 [V2]× (which = 0) or c2 δ + c3 [V1]× (which = 1)."""
     d = 1.0 if i == j else 0.0
@@ -107,7 +108,7 @@ def _dfibre(c, v1, v2, which, i, j):
     return c[1] * d + c[2] * _skew(v1, i, j)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _skew(a, i, j):
     """[a]×_ij (so that [a]× b = a × b)."""
     if i == j:
@@ -119,7 +120,7 @@ def _skew(a, i, j):
     return -a[1] if j == 0 else a[0]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def hinge_group(q, mult, offset, dofs, alpha, beta, smap, want_k, r, rc, kdata, ke):
     """Revolute joints whose axis lies in no section plane, by multipliers (SPEC §5.2):
     c_k = a·b_k = 0 (k = 1, 2) with a = Σ α_j W_j^A the axis fibre of body A and b_k = Σ β_kj W_j^B
@@ -182,7 +183,7 @@ def hinge_group(q, mult, offset, dofs, alpha, beta, smap, want_k, r, rc, kdata, 
             scatter_matrix(smap[h], ke, kdata)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def director_tie_group(q, mult, offset, dofs, alpha, smap, want_k, r, rc, kdata, ke):
     """Shell director tied to a frame section (``shell_rigid`` joints), by multipliers:
     c = G − Σ α_j W_j = 0 (3 equations) with W = (V1, V2, V1 × V2) of the frame node and α from the

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 from .scatter import scatter_matrix
 
 # Columns of the per-element material table ``mat[e]``.
@@ -33,7 +34,7 @@ MAT_E, MAT_ET, MAT_G, MAT_GT, MAT_KT, MAT_KS, MAT_TAU = 0, 1, 2, 3, 4, 5, 6
 N_MAT = 7
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def frame_element(qe, ve, dax, dsec, w, nsec, mat, lam, lam_rate, c_v, want_k, want_dlam,
                   d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, re, ke, kn):
     """Residual, tangent, energy and dissipation of one positional frame element.
@@ -379,7 +380,7 @@ _SV_X = _SV_UH + 6         # 18 slots: the block kinds combined with a row node'
 N_HACC = _SV_X + 18
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _station_gram(s_pt, w, p0, nsec, lam, gacc):
     """Gram matrix Σ w·λ·mono_i·mono_j of the section monomials (1, s₁, s₂, s₁², s₁s₂, s₂²) over the
     station's points ``p0 … p0 + nsec − 1`` into ``gacc[_GR:_GR + 36]`` (row-major, symmetric)."""
@@ -399,7 +400,7 @@ def _station_gram(s_pt, w, p0, nsec, lam, gacc):
             gacc[_GR + 6 * i + j] = gacc[_GR + 6 * j + i]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def station_grams(s_pt, w, nsec, gacc, out):
     """``out (ne, nst, 36)``: every straight element's station Gram matrices at λ = 1, once per
     model — what :func:`straight_frame_element` computes at every call of an element at λ = 1
@@ -411,7 +412,7 @@ def station_grams(s_pt, w, nsec, gacc, out):
                 out[e, st, i] = gacc[_GR + i]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam_rate, c_v, want_k, want_dlam,
                            blocks, hacc, gacc, tk, tg, gram, re, ke):
     """Residual, tangent, energy and dissipation of one straight frame element, undamped or
@@ -834,7 +835,7 @@ def straight_frame_element(qe, ve, phi_st, dphi_st, s_pt, w, nsec, mat, lam, lam
     return energy, dudlam, diss
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_v, smap, want_k,
                 want_dlam, r, kdata, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn,
                 straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg, gram):
@@ -880,7 +881,7 @@ def frame_group(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_
     return energy, diss
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def frame_group_actuator_dudlam(q, v, edofs, dax, dsec, w, nsec, mat, act, lam_act, lam_rate, c_v, want_k,
                                 want_dlam, out, d, fp, fd, ep, ed, bmat, bdot, gbar, gdot, qe, ve, re, ke, kn,
                                 straight, phi_st, dphi_st, s_pt, blocks, hacc, gacc, tk, tg, gram):

@@ -23,8 +23,10 @@ import math
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 
-@njit(cache=True)
+
+@njit(**KERNEL)
 def frame_orientation(q, edofs, act, lam_act, phi, dphi, inv_det0, inv_len0):
     """Smallest volume ratio and fibre stretch over a frame group's stations.
 
@@ -80,7 +82,7 @@ def frame_orientation(q, edofs, act, lam_act, phi, dphi, inv_det0, inv_len0):
     return jmin, smin, emin
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def step_work(q, q_n, f_ext, f_prev, r_int, a, v, c_m, m_indptr, m_indices, m_data, drive_ids, react_prev,
               react):
     """Work done on the mechanism over a step by the loads and the driven supports (J).
@@ -105,7 +107,7 @@ def step_work(q, q_n, f_ext, f_prev, r_int, a, v, c_m, m_indptr, m_indices, m_da
     return w_ext, w_drv
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def drive_reactions(r_int, a, v, c_m, m_indptr, m_indices, m_data, f_ext, drive_ids, react):
     """Reactions ``R = f_int + M(a + c_m v) − f_ext`` at the driven DOFs ``drive_ids`` into
     ``react`` (N, N·m): what the prescribed motion has to supply."""
@@ -118,7 +120,7 @@ def drive_reactions(r_int, a, v, c_m, m_indptr, m_indices, m_data, f_ext, drive_
         react[k] = r_int[i] + s - f_ext[i]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def conservative_moment_work(q, q_p, vdofs, axes, magnitude, scale):
     """Exact work ``Σ M Δθ`` of the fixed-axis conservative moments
     (:func:`flexmb_core.kernels.moments.conservative_moments`) from ``q_p`` to ``q`` (J): ``Δθ``
@@ -137,7 +139,7 @@ def conservative_moment_work(q, q_p, vdofs, axes, magnitude, scale):
     return w
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def energy_resolution(free, dof_scale, tol, r_int, f_ext):
     """How well the potential energy of a converged state is known (J): Newton leaves each free
     DOF uncertain by ``tol·scale_i``, which moves the work of the internal and external forces by
@@ -150,7 +152,7 @@ def energy_resolution(free, dof_scale, tol, r_int, f_ext):
     return tol * s
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def dynamic_guard(q, dq, free, dof_scale, ivec, gvec, il, react, ir, m_indptr, m_indices, m_data, f_ext, r_int, rf,
                   a, v, drive_ids, c_m, c_v, tol, c_mass, rise_tol, bal_tol, u_p, u_last, u_scale, extra_p,
                   extra_size, w_mom, kin, e_start, balance):

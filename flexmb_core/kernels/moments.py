@@ -14,8 +14,10 @@ from __future__ import annotations
 
 from numba import njit
 
+from ..jit import KERNEL
 
-@njit(cache=True)
+
+@njit(**KERNEL)
 def follower_moments(q, vdofs, mbody, scale, smap, want_k, r, kdata):
     """Follower moments. ``vdofs (nm, 6)`` = [V1, V2] global ids, ``mbody (nm, 3)`` (N·m)."""
     for m in range(vdofs.shape[0]):
@@ -77,7 +79,7 @@ def follower_moments(q, vdofs, mbody, scale, smap, want_k, r, kdata):
                     k += 1
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def conservative_moments(q, vdofs, axes, magnitude, scale, smap, want_k, r, kdata):
     """Fixed-axis conservative moments ``M θ_n(V)``.
 

@@ -2,8 +2,10 @@
 
 from numba import njit
 
+from ..jit import KERNEL
 
-@njit(cache=True)
+
+@njit(**KERNEL)
 def scatter_matrix(smap_row, ke, kdata):
     """``kdata[smap_row[k]] += ke.flat[k]`` for every local entry with a position (≥ 0).
 

@@ -66,6 +66,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..jit import KERNEL
 from .scatter import scatter_matrix
 
 NODES = 10          # cubic triangle
@@ -126,7 +127,7 @@ C_NIP, C_GRAM1, C_GRAM2, C_IPC = 0, 1, 2, 6
 IP_CONST = (IP_PSI, IP_PSI + 1, IP_PSI + 2, IP_PSI + 3, IP_PSI + 4, IP_PSI + 5, IP_OM, IP_P0, IP_P1)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _fields(qe, phi, dphi, p):
     """y,1 y,2; g g,1 g,2; a a,1 a,2 at point ``p`` (an 18-tuple). Plain IEEE rounding here, in
     :func:`_deformation` and :func:`_stresses` (fastmath would fuse their products): E of a small
@@ -155,7 +156,7 @@ def _fields(qe, phi, dphi, p):
     return (y1x, y1y, y1z, y2x, y2y, y2z, gx, gy, gz, g1x, g1y, g1z, g2x, g2y, g2z, aa, a1, a2)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _deformation(fl, z, hh, a0inv, p, f):
     """F = A¹ (A⁰)⁻¹ into ``f[0:3, 0:3]`` at thickness coordinate ``z`` of point ``p`` from the
     fields ``fl`` of :func:`_fields`."""
@@ -183,7 +184,7 @@ def _deformation(fl, z, hh, a0inv, p, f):
         f[2, j] = c0z * i0 + c1z * i1 + c2z * i2
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _run_end(phi, dphi, p0):
     """End (exclusive) of the run of points through the thickness that share point ``p0``'s
     in-plane position (consecutive rows of ``phi``/``dphi`` equal)."""
@@ -198,7 +199,7 @@ def _run_end(phi, dphi, p0):
     return p1
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _constants(phi, dphi, w, a0inv, f):
     """The state-independent part of pass 1, into ``f``: per in-plane point i the basis ψ = (1, x, y,
     x², xy, y²) (x = ξ1 − ⅓, y = ξ2 − ⅓), Ω = Σ w and its run of points through the thickness; per
@@ -283,7 +284,7 @@ def shell_constants(phi, dphi, zeta, a0inv, w, const):
     return nip
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _load_constants(const, npt, f, bmat):
     """:func:`shell_constants`' numbers back into the scratch rows the passes read; returns nip."""
     nip = int(const[C_NIP, 0])
@@ -309,7 +310,7 @@ def const_rows(nip: int, npt: int) -> int:
     return C_IPC + nip + npt
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f, nip):
     """Pass 1: F and E = ½(FᵀF − I) of every point into its ``f`` row and per in-plane point the
     thickness mean m of Ê11, Ê22, Ê12, Ê13, Ê23 (weights w/Ω), from the constants
@@ -357,7 +358,7 @@ def _strains(qe, phi, dphi, zeta, a0inv, w, hh, f, nip):
                 f[r, IP_M + c] += wm * (f[row, a + ca] * eb0 + f[row, a + 3 + ca] * eb1 + f[row, a + 6 + ca] * eb2)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _invert_grams(f, bmat, nip):
     """Gram matrices Σ Ω ψ_k ψ_l of P1 (3 × 3) and P2 (6 × 6) over the in-plane points, inverted in
     place (Gauss–Jordan without pivoting: symmetric positive definite) into rows B_MI1, B_MI2."""
@@ -385,7 +386,7 @@ def _invert_grams(f, bmat, nip):
                     bmat[r0 + i, l] -= fac * bmat[r0 + k, l]
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _l2(f, bmat, nip, gm, gs, adjoint):
     """The corrections of the projection over the in-plane points, component by component: D =
     γ (Πm − m) from the means m (``adjoint`` False), or its adjoint U = γ (Πᵀ T − T) from the thickness
@@ -420,7 +421,7 @@ def _l2(f, bmat, nip, gm, gs, adjoint):
             f[r, dst + c] = g * (t - f[r, src + c])
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **KERNEL)
 def _congruence(x00, x01, x02, x10, x11, x12, x20, x21, x22, d0, d1, d2, d3, d4):
     """Mᵀ D M of the 3 × 3 M = [x_ab] and the symmetric D = [[d0, d2, d3], [d2, d1, d4], [d3, d4, 0]]
     (the shell's assumed-strain corrections have no thickness-normal component): its components
@@ -432,7 +433,7 @@ def _congruence(x00, x01, x02, x10, x11, x12, x20, x21, x22, d0, d1, d2, d3, d4)
             x00 * u1 + x10 * v1 + x20 * z1, x00 * u2 + x10 * v2 + x20 * z2, x01 * u2 + x11 * v2 + x21 * z2)
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _stresses(a0inv, w, lam_l, mu, f, nip):
     """Pass 2: E* = E + (A⁰)⁻ᵀ ΔÊ(D) (A⁰)⁻¹ at every point, its SVK stress S* (into the point's row)
     and, per in-plane point, T = Σ w Ŝ* of the conjugate covariant stresses (Ŝ = (A⁰)⁻¹ S (A⁰)⁻ᵀ,
@@ -489,7 +490,7 @@ def _stresses(a0inv, w, lam_l, mu, f, nip):
     return energy
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu, gm):
     """At one point: L (Voigt ΔE of each ΔÊ component) and R (the Ê components of a Voigt E), then
     Mv += (w/Ω) R B, Z += Lᵀ (w C B) and Q += w Lᵀ C L (the B and w C B rows of the point already
@@ -543,7 +544,7 @@ def _projection_rows(a0inv, p, f, row, bmat, cb, wp, om, lam_l, mu, gm):
                                        + cl5 * bmat[B_LV + 5, c2])
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
     """The projection's tangent parts of one in-plane point (its Mv, Z, Q summed over the thickness):
     H += −Zᵀ γMv − (γMv)ᵀ Y (upper triangle; Y = Z − Q γ Mv), and for the rank-21 update the rows
@@ -606,7 +607,7 @@ def _assumed_in_plane(f, r_ip, phi, dphi, p0, bmat, cb, gm, gs):
                     bmat[B_G + r, r02 + k2] += q * f[r_ip, IP_PSI + k2]
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(fastmath={"reassoc", "contract"}, **KERNEL)
 def _coupled_update(cb, bmat, ke, gm, gs):
     """Upper triangle of K_e += ∂cᵀ V + Vᵀ ∂c with V = W + ½ G ∂c over the active projected
     coefficients (membrane rows 0–8 when γ_m ≠ 0, shear rows 9–20 when γ_s ≠ 0): the material
@@ -626,7 +627,7 @@ def _coupled_update(cb, bmat, ke, gm, gs):
                 ke[row, col] += a * cb[C_W + r, col] + b * cb[C_CM + r, col]
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(fastmath={"reassoc", "contract"}, **KERNEL)
 def _spread_slot(cb, ke, slot):
     """Upper triangle of K_e += Sᵀ T for one batch slot (T rows ``C_T + 21·slot + v``, s_ℓ rows
     ``C_S + 3·slot``); the 70-long inner loops run over contiguous columns of ``ke`` and ``cb``."""
@@ -648,7 +649,7 @@ def _spread_slot(cb, ke, slot):
                 ke[row, c] += ph * cb[t, c] + s1 * cb[t + NDOF_NODE, c] + s2 * cb[t + 2 * NDOF_NODE, c]
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(fastmath={"reassoc", "contract"}, **KERNEL)
 def _spread_batch(cb, ke):
     """Upper triangle of K_e += Σ_slots Sᵀ T for a full batch (NB = 4 slots): one pass over K_e."""
     u = NDOF_NODE
@@ -683,7 +684,7 @@ def _spread_batch(cb, ke):
                                + a30 * cb[r3, c] + a31 * cb[r3 + u, c] + a32 * cb[r3 + 2 * u, c])
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, const, want_k, dv, dfa, f, bmat, cb, re, ke):
     """Residual, tangent and strain energy of one positional shell element (assumed strains E*).
 
@@ -1007,7 +1008,7 @@ def shell_element(qe, phi, dphi, zeta, a0inv, w, mat, const, want_k, dv, dfa, f,
 
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def shell_group(q, edofs, phi, dphi, zeta, a0inv, w, mat, const, smap, want_k, r, kdata, dv, dfa, f, bmat, cb,
                 qe, re, ke):
     """Loop over one shell group: gather, element kernel, scatter into ``r`` and CSR ``kdata``.

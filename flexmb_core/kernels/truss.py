@@ -11,10 +11,11 @@ from __future__ import annotations
 
 from numba import njit
 
+from ..jit import KERNEL
 from .scatter import scatter_matrix
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def truss_element(xe, ve, l0, ea, tau, lam, lam_rate, c_v, want_k, re, ke):
     """Residual, tangent, energy and dissipation of one bar.
 
@@ -76,7 +77,7 @@ def truss_element(xe, ve, l0, ea, tau, lam, lam_rate, c_v, want_k, re, ke):
     return energy, dudla * l0, ea * tau * la * rate * rate
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def truss_group(q, v, edofs, l0, ea, tau, act, lam_act, lam_rate, c_v, smap, want_k, r, kdata, qe, ve, re, ke):
     """Loop over a truss group; scatter into ``r`` and CSR ``kdata``. Returns strain energy (J)
     and dissipated power (W)."""
@@ -104,7 +105,7 @@ def truss_group(q, v, edofs, l0, ea, tau, act, lam_act, lam_rate, c_v, smap, wan
     return energy, diss
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True, **KERNEL)
 def truss_group_actuator_dudlam(q, v, edofs, l0, ea, tau, act, lam_act, lam_rate, c_v, want_k, out, qe, ve,
                                 re, ke):
     """Accumulate dU/dλ (+ ∂D/∂λ̇) of every actuated bar into ``out[actuator]`` (J); ``want_k`` =

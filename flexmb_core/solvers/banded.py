@@ -53,6 +53,7 @@ from numba.extending import register_jitable
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ..errors import FlexmbError
+from ..jit import KERNEL
 
 __all__ = ["SkylineLU", "SingularPivotError", "NotFactoredError"]
 
@@ -427,7 +428,7 @@ def _blocks(uptr, uidx, max_block):
 # Hot kernels
 # ---------------------------------------------------------------------------------------------
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(fastmath=_FASTMATH, **KERNEL)
 def _factor_kernel(data, data2, coef, slot, accumulate, zero_slots, base, lrun_ptr, lrun_lo, lrun_hi,
                    urun_ptr, urun_lo, urun_hi, blk_ptr, env, inv_diag, pivot_tol, static_pivot, stats, nlate):
     """Scatter ``A = data + coef * data2`` into the envelope and factor ``P A Pᵀ = L U`` in place,
@@ -710,7 +711,7 @@ def _unscale_late(n0, s, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, ur
                 env[bi + j] *= 1.0 / (di * s)
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(fastmath=_FASTMATH, **KERNEL)
 def _solve_kernel(b, perm, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr, urun_lo, urun_hi, env,
                   inv_diag, work, out):
     """Solve ``A x = b`` with the factors of ``P A Pᵀ = L U``.
@@ -778,7 +779,7 @@ def _residual_kernel(data, data2, coef, indptr, indices, b, x, res):
     return worst
 
 
-@njit(cache=True)
+@njit(**KERNEL)
 def _refine_kernel(data, data2, coef, indptr, indices, b, x, perm, base, lrun_ptr, lrun_lo, lrun_hi, urun_ptr,
                    urun_lo, urun_hi, env, inv_diag, work, res, corr, basis, hess, rot):
     """Refine ``x ≈ A⁻¹ b`` (``A = data + coef * data2`` on the CSR pattern ``indptr, indices``)
