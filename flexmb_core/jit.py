@@ -12,8 +12,10 @@ beyond the call, so the references are the caller's and counting them buys nothi
 runtime numba refuses, when it compiles, any allocation (``np.empty``) or any function returning a
 new array in these kernels: that rule of the time loop is then checked by the compiler
 (``tests/unit/test_signatures.py`` checks that every step kernel is compiled this way). The
-option is numba's own (``numba.core.cpu.CPUTargetOptions``, ``_nrt``); the kernels they call
-inherit it.
+functions these kernels call inherit the option. It is an option of numba's CPU target
+(``numba.core.cpu.CPUTargetOptions._nrt``) that numba's own tests use but its documentation does
+not list: a numba without it refuses to compile the kernels ("Unrecognized options"), so they
+would fail loudly rather than count references again.
 """
 
 from __future__ import annotations
