@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from .jit import KERNEL
 from .model.model import Model
 
 
@@ -39,25 +40,28 @@ class _Platform:
     def __init__(self, model: Model, name: str, node_ids: np.ndarray, legs: np.ndarray, far: np.ndarray,
                  near: np.ndarray):
         self.name, self.node_ids, self.legs, self.far, self.near = name, node_ids, legs, far, near
+        self._work = np.zeros((8, 6))       # the Jacobian (rows 0–5), the centroid, a leg's p and u
         self.sign0 = math.copysign(1.0, self.det(model.q0))
 
     def det(self, q: np.ndarray) -> float:
         """``det J`` at positions ``q`` (m³ · dimensionless: only its sign is used)."""
-        return _leg_jacobian_det(q, self.node_ids, self.near, self.far)
+        return _leg_jacobian_det(q, self.node_ids, self.near, self.far, self._work)
 
 
-@njit(cache=True, nogil=True)
-def _leg_jacobian_det(q, node_ids, near, far):
+@njit(nogil=True, **KERNEL)
+def _leg_jacobian_det(q, node_ids, near, far, work):
     """det of the 6 × 6 leg Jacobian (module docstring) by Gaussian elimination with partial
-    pivoting (a few µs; numpy's det and stacking cost ~0.2 ms a step)."""
-    c = np.zeros(3)
+    pivoting (a few µs; numpy's det and stacking cost ~0.2 ms a step), in ``work (8, 6)``: the
+    Jacobian in rows 0–5, the centroid in row 6, a leg's point and unit vector in row 7."""
+    a = work[:6]
+    c = work[6, :3]
+    p = work[7, :3]
+    u = work[7, 3:]
+    c[:] = 0.0
     for k in range(node_ids.shape[0]):
         for j in range(3):
             c[j] += q[node_ids[k, j]] / node_ids.shape[0]
-    a = np.empty((6, 6))
     for i in range(6):
-        p = np.empty(3)
-        u = np.empty(3)
         for j in range(3):
             p[j] = q[near[i, j]]
             u[j] = p[j] - q[far[i, j]]

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from numba import njit
 
+import flexmb_core.commands as commands_mod
+import flexmb_core.faults as faults_mod
 import flexmb_core.integrators.energy as energy_mod
 import flexmb_core.integrators.fast as fast_mod
 import flexmb_core.integrators.fused as fused_mod
@@ -35,7 +37,7 @@ MODULES = (frame_mod, truss_mod, moments_mod, energy_mod, constraints_mod, scatt
 
 
 # the step's kernels and the modules that hold them; the setup kernels that allocate their results
-STEP_MODULES = MODULES + (fused_mod, static_step_mod, banded_mod)
+STEP_MODULES = MODULES + (fused_mod, static_step_mod, banded_mod, faults_mod, commands_mod)
 SETUP_KERNELS = {"flexmb_core.kernels.shell.shell_constants", "flexmb_core.solvers.banded._cuthill_mckee",
                  "flexmb_core.solvers.banded._to_runs", "flexmb_core.solvers.banded._symbolic",
                  "flexmb_core.solvers.banded._blocks"}
