@@ -24,19 +24,6 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import make_array, populate_array
 
 
-def _fill_view(context, builder, pack, view, src, start, dims):
-    """An array structure of type ``view`` over ``src``'s data from ``start`` (items), C strides
-    from ``dims``, ``src``'s meminfo and parent (the view keeps the pack alive)."""
-    out = make_array(view)(context, builder)
-    itemsize = context.get_constant(types.intp, context.get_abi_sizeof(context.get_data_type(pack.dtype)))
-    strides = [itemsize]
-    for d in reversed(dims[1:]):
-        strides.insert(0, builder.mul(strides[0], d))
-    populate_array(out, data=builder.gep(src.data, [start]), shape=dims, strides=strides,
-                   itemsize=itemsize, meminfo=src.meminfo, parent=src.parent)
-    return impl_ret_borrowed(context, builder, view, out._getvalue())
-
-
 def _row_view(ndim: int):
     @intrinsic
     def row_view(typingctx, pack, row):
@@ -56,7 +43,15 @@ def _row_view(ndim: int):
                 value = builder.load(builder.gep(entries.data, [context.get_constant(types.intp, k)]))
                 return context.cast(builder, value, row.dtype, types.intp)
             dims = [entry(5)] if ndim == 1 else [entry(1 + k) for k in range(ndim)]
-            return _fill_view(context, builder, pack, view, src, entry(0), dims)
+            out = make_array(view)(context, builder)
+            itemsize = context.get_constant(types.intp, context.get_abi_sizeof(context.get_data_type(pack.dtype)))
+            strides = [itemsize]
+            for d in reversed(dims[1:]):
+                strides.insert(0, builder.mul(strides[0], d))
+            # the pack's meminfo and parent: the view keeps the pack alive
+            populate_array(out, data=builder.gep(src.data, [entry(0)]), shape=dims, strides=strides,
+                           itemsize=itemsize, meminfo=src.meminfo, parent=src.parent)
+            return impl_ret_borrowed(context, builder, view, out._getvalue())
         return view(pack, row), codegen
     return row_view
 
