@@ -85,8 +85,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("step_margin", 4.0e-4, "realtime: a step without a waiting command starts this long before its "
               "deadline (s); a command starts its step at once", low=0.0, high=1.0),
     ParamSpec("step_margin_auto", True, "realtime: widen step_margin to the step's own p99.9 wall time over "
-              "the last second plus 0.2 ms (at most 4 Δt; step_margin is then the least margin), so that steps "
-              "that take longer (a tangent refresh) still end before their deadline; false keeps step_margin"),
+              "the last second plus 0.2 ms (at most 4 Δt, and 4 Δt until 250 steps are measured; step_margin is "
+              "then the least margin), so that steps that take longer (a tangent refresh, the first steps) still "
+              "end before their deadline; false keeps step_margin"),
     ParamSpec("cpu_affinity", "", "realtime: comma-separated CPU ids for the stepping thread ('' = any CPU)"),
     ParamSpec("rt_priority", -1, "realtime: SCHED_FIFO priority of the stepping thread (1-99; 0 = the normal "
               "scheduler; -1 = 20 where the OS allows it, else the normal scheduler, said once at INFO level); an "

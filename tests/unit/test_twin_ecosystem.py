@@ -290,8 +290,9 @@ def test_a_stalled_publisher_bounds_the_outbox_and_refuses_commands_it_could_not
 
 def test_the_automatic_step_margin_covers_the_slow_steps_within_its_bounds(stewart):
     """``auto_margin``: the recent p99.9 step wall time plus the headroom, never under the configured
-    margin, at most AUTO_MARGIN_STEPS Δt (unless the configured margin is larger); a Stepper widens
-    its margin, and the steps a command may lead with it, from its own step times."""
+    margin, at most AUTO_MARGIN_STEPS Δt (unless the configured margin is larger); a Stepper starts
+    at the widest and fits its margin, and the steps a command may lead with it, to its own step
+    times."""
     from flexmb_io.realtime import AUTO_MARGIN_HEADROOM, AUTO_MARGIN_STEPS, COMMAND_LEAD, auto_margin
 
     dt = 1e-3
@@ -303,6 +304,12 @@ def test_the_automatic_step_margin_covers_the_slow_steps_within_its_bounds(stewa
     runner = TwinRunner(model)
     runner.start(warmup=False)
     st = Stepper(runner, StepperConfig(mode="realtime", margin=0.4e-3, margin_auto=True), lambda: None)
+    # nothing measured yet: the widest margin of the rule (the first steps are the slowest)
+    assert st.margin == AUTO_MARGIN_STEPS * dt and st._command_lead == COMMAND_LEAD + AUTO_MARGIN_STEPS
+    st._update_margin()            # fewer than AUTO_MARGIN_EVERY steps: kept
+    assert st.margin == AUTO_MARGIN_STEPS * dt
+    fixed = Stepper(runner, StepperConfig(mode="realtime", margin=0.4e-3), lambda: None)
+    assert fixed.margin == 0.4e-3 and fixed._command_lead == COMMAND_LEAD
     for k in range(1000):          # 1 % of the steps (tangent refreshes) take 0.9 ms, the others 0.1 ms
         st.step_walls.add(0.9e-3 if k % 100 == 0 else 0.1e-3)
     st._update_margin()
