@@ -283,7 +283,7 @@ class Stepper:
         self._lock = threading.Lock()         # a command application and a step exclude each other
         self._pending = 0                     # commands applied since the last step began
         # steps ahead of the wall clock a command may take the twin: COMMAND_LEAD beyond the idle lead
-        self.margin = config.margin           # s, in force (auto_margin may widen it)
+        self.margin = config.margin           # s, in force (auto_margin sets it when margin_auto)
         if config.margin_auto:
             # no step measured yet: the widest margin of the rule until AUTO_MARGIN_EVERY steps are.
             # The first steps are the slowest (first calls, cold caches, the client connecting):
