@@ -123,36 +123,31 @@ def _run(model, steps: int, wrapped: bool) -> tuple[float, float, tuple[float, f
     return wall / steps * 1e6, spent[0] / steps / 1000, counts, sim
 
 
-def _item(pack: np.ndarray, row: np.ndarray) -> np.ndarray:
-    """The pack's item at its layout row (``view1`` of the packs, which numba code alone can call)."""
-    return pack[row[0]:row[0] + row[5]]
-
-
 def _components(sim: Simulator) -> dict[str, float]:
     """µs per call of the kernel's parts, at ``sim``'s state (its factors are overwritten)."""
     f = sim._dynamic.fast
     d, dlay, f_ext, r, env, inv_diag, stats = f._shared
     cf, ci, wf, wi = f._packs
-    lay = f._lay
-    par = _item(cf, lay[L_PAR])
+    lay, item = f._lay, f.packs.view
+    par = item(L_PAR, 0)
     st = sim.state
     damped = par[P_DAMPED] != 0.0
-    v = _item(wf, lay[L_VEVAL])
+    v = item(L_VEVAL)
     v[:] = st.v
     c_v = sim._dynamic.gamma / (sim._dynamic.beta * sim.spec.dt) if damped else 0.0
-    lam_rate = st.lam_rate if damped else _item(wf, lay[L_ZLAM])
-    kdata = _item(wf, lay[L_KDATA])
+    lam_rate = st.lam_rate if damped else item(L_ZLAM)
+    kdata = item(L_KDATA)
     no_dlam = sim.spec.dt < 0.0
     args = (st.q, v, st.lam, lam_rate, c_v)
     tail = (no_dlam, st.mult, r, kdata, cf, ci, wf, wi, lay, par)
     out = {"assembly, residual": best_us(_rep_assemble, *args, False, *tail, k=200),
            "assembly, residual + tangent": best_us(_rep_assemble, *args, True, *tail, k=50)}
     coef = float(sim.data.tan[1]) or 1.0
-    out["LU factor"] = best_us(_rep_factor, kdata.copy(), kdata, _item(wf, lay[L_MASSK]), coef, env, inv_diag, stats,
+    out["LU factor"] = best_us(_rep_factor, kdata.copy(), kdata, item(L_MASSK), coef, env, inv_diag, stats,
                                 int(par[P_NMULT]), wf, wi, lay, par, k=50)
-    rf = _item(wf, lay[L_RF])
+    rf = item(L_RF)
     rf[:] = np.linspace(-1.0, 1.0, rf.size)
-    out["LU solve"] = best_us(_rep_solve, rf, _item(wf, lay[L_DQ]), env, inv_diag, stats, wf, wi, lay, par, k=500)
+    out["LU solve"] = best_us(_rep_solve, rf, item(L_DQ), env, inv_diag, stats, wf, wi, lay, par, k=500)
     return out
 
 

@@ -440,10 +440,11 @@ class ModelPacks:
         self.drive_values, self._drive_ids = self.view(L_DRVVAL), drive_ids
         self._q_drive = np.zeros(n) if m.drives is not None else None
 
-    def view(self, item: int) -> np.ndarray:
-        """The flat writable view of a ``wf`` item."""
+    def view(self, item: int, pack: int = 2) -> np.ndarray:
+        """The flat view of an item of ``packs[pack]`` (0 ``cf``, 1 ``ci``, 2 ``wf``, 3 ``wi``; the
+        work packs' views are writable): what ``view1`` gives numba code, for Python."""
         o, size = self.lay[item, 0], self.lay[item, 5]
-        return self.packs[2][o:o + size]
+        return self.packs[pack][o:o + size]
 
     def drives(self, q: np.ndarray, t: float) -> None:
         """The driven supports' DOFs at ``t`` into their ``wf`` item (by :func:`apply_drives`
