@@ -422,8 +422,9 @@ class Stepper:
             except Exception as exc:            # a message the checks did not foresee: rejected whole
                 rejection = f"{topic}: rejected: {type(exc).__name__}: {str(exc)[:200]}"
             if rejection is None:
+                if not self._new_command:      # the answer's latency counts from the oldest it answers
+                    self._cmd_recv_wall = recv_wall
                 self._new_command = True
-                self._cmd_recv_wall = recv_wall
             self.outbox.append(("cmd", topic, kind, msg, t_applied, rejection, recv_wall, tag, arrival))
             realtime = self.cfg.mode == "realtime"
             if self._held or (steps <= 0 and realtime):      # applied; no step owed

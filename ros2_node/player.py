@@ -11,8 +11,9 @@ been holding its start lengths for a while): no jump from rest, whenever the pla
 Pacing. ``lockstep``: send the command for ``t + Δt``, wait for the twin's status that answers it,
 repeat (deterministic). ``realtime``: send at ``--rate`` Hz on the wall clock, for the twin's time
 estimated from its ``/clock`` (the twin owns time). Either way the player measures the end-to-end
-command→state latency (its stamp echoed in ``TwinStatus.command_stamp``) and, when the command
-program knows the commanded pose, how closely ``~/platform_pose`` tracks it.
+command→state latency (until the first ``TwinStatus`` whose ``command_stamp`` is its stamp or a
+newer one: the twin echoes the newest command a state includes) and, when the command program
+knows the commanded pose, how closely ``~/platform_pose`` tracks it.
 """
 
 from __future__ import annotations
@@ -225,10 +226,10 @@ class Player:
         self.sim_time = None                  # twin's newest reported time (s)
         self.t0 = 0.0                         # twin's time when playback began: the law's t = 0
         self.clock = TwinClock()              # realtime: the twin's time estimated between reports
-        self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent, until answered or expired
+        self.sent: dict[int, float] = {}      # stamp (ns) → wall time sent, in sending order, until answered or expired
         self.expired = 0                      # commands unanswered for UNANSWERED_AFTER s (dropped from sent)
         self._next_expiry = 0.0               # perf_counter of the next sweep of sent (once a second)
-        self.latencies = Series()             # s, command sent → status echoing its stamp
+        self.latencies = Series()             # s, command sent → first status echoing its stamp or a newer one
         self.answered_ns = -1
         self.pose_errors = Series()           # m
         self.angle_errors = Series()          # rad
@@ -251,9 +252,17 @@ class Player:
         if not msg.converged:
             self.unconverged += 1
         ns = msg.command_stamp.sec * 1_000_000_000 + msg.command_stamp.nanosec
-        sent = self.sent.pop(ns, None)
-        if sent is not None:
-            self.latencies.add(now - sent)
+        # the state includes every command stamped up to the one it echoes: a twin that took two
+        # commands before one step echoes only the newer, and the older one's latency counts too
+        # (sent in stamp order; an out-of-order one waits for its own echo or expires)
+        sent = self.sent
+        while sent:
+            first = next(iter(sent))
+            if first > ns:
+                break
+            self.latencies.add(now - sent.pop(first))
+        if ns in sent:
+            self.latencies.add(now - sent.pop(ns))
         self.answered_ns = max(self.answered_ns, ns)
         self._note_time(msg.sim_time, now)
 
