@@ -15,7 +15,8 @@ Pacing (``realtime``). State ``n`` stands for the wall time ``t0 + nΔt``. The s
 safe moment, ``margin`` before its deadline; a command starts it at once — on the thread that
 received the command — as long as the twin is then at most :data:`COMMAND_LEAD` steps ahead of the
 wall clock, so a command is answered within one step's compute time instead of waiting for the
-next tick. A step that ends after its deadline is a deadline miss;
+next tick (a command that finds the twin that far ahead waits for the next step: see
+:data:`COMMAND_LEAD`). A step that ends after its deadline is a deadline miss;
 one that ends more than ``max_lag`` late re-anchors the clock (an overrun) instead of bursting.
 ``lockstep``: one step per command, as soon as it arrives.
 
@@ -49,10 +50,23 @@ from .twin import TwinRunner, apply_message
 _PR_SET_TIMERSLACK = 29
 # steps a command-triggered step may put the twin ahead of the wall clock beyond where the idle steps
 # keep it: an idle step runs late in its period (step_margin before the deadline), so a command
-# arriving after it would otherwise wait for the next period; with 2 it is answered at once and the
-# idle steps wait for the clock instead. A step_margin of more than Δt keeps the twin that many steps
-# ahead of the wall clock (a buffer against late wake-ups), and the commands' lead grows with it.
-COMMAND_LEAD = 2
+# arriving after it would otherwise wait for the next period; within the lead it is answered at once
+# and the idle steps wait for the clock instead. A step_margin of more than Δt keeps the twin that
+# many steps ahead of the wall clock (a buffer against late wake-ups); the commands' lead adds to it.
+# A command stream at the step rate takes one step per command, and an idle step that fills a gap in
+# it (a late command) puts the twin a step further ahead of the stream for good, so the twin soon
+# runs at this lead: the steps that commands run then end up to the lead minus a period before their
+# deadline, and a command that finds the twin at the lead waits for the next step — the next
+# command's, or the idle step at its usual time. Never for the first moment the lead allows: that
+# kept the twin at the lead for good, every later command waiting for the clock too (12–73 % of a
+# 1 kHz stream's commands, 2026-11-29). Measured then (bar legs and 1-element frame legs with the
+# truss platform, 1 kHz stamped commands, interleaved 20 s runs, docs/benchmarks/node_ab_lead.md):
+# with a lead of 2 the commands that waited fell from thousands to 28–270 of 20 000 and the latency
+# p50 by 0.04–0.23 ms, but the missed deadlines rose (steps a command runs at the lead end 2 − φ
+# periods before their deadline, φ the command's phase in its period); 3 and 4 gave both back, 4
+# the most: 0–6 missed against 14–63 before, 2–22 commands waited, latency p99 1.8–2.7 ms against
+# 2.2–3.9. The price: a command acts on the twin's time, up to this many steps ahead of its arrival.
+COMMAND_LEAD = 4
 # s the stepping thread blocks before each step while it is behind the wall clock: a twin that
 # cannot keep up (and on SCHED_FIFO would never leave its core) still lets the executor, the
 # publisher and the rest of the machine run (measured: a 50 kHz overloaded twin starved DDS
@@ -182,6 +196,7 @@ class StepperStats:
     dropped_snapshots: int = 0       # publications the publisher fell too far behind to make
     stalled_drops: int = 0           # publications and /clock events not queued: the outbox was full
     recent_misses: int = 0           # deadline misses within the last ``window`` steps
+    commands_waited: int = 0         # realtime commands that found the twin at its lead: no step of their own
 
     @property
     def dropped_publications(self) -> int:
@@ -399,7 +414,8 @@ class Stepper:
         (it is queued as already answered: the publisher records it and publishes only what else
         is due; the caller wakes the publisher when ``snap.wake``, else the events wait for its next
         wake — a thread woken per command costs ~10–60 µs here, see :meth:`_step`). Otherwise (the
-        twin is ahead, or lockstep) the stepping thread is woken for it and None is returned.
+        twin is ahead) the command waits for the next step — the next command's, or the idle step
+        at its usual time — and None is returned; lockstep: the stepping thread is woken for it.
 
         ``steps`` (realtime): the steps it may run here, as many as the wall clock allows (the last
         one's snapshot answered); 0: applied and recorded only. A backlog taken in one go is applied
@@ -430,9 +446,9 @@ class Stepper:
             if self._held or (steps <= 0 and realtime):      # applied; no step owed
                 self._notify()
                 return None
-            self._pending += 1
-            if realtime and self._running and self._may_step():
-                self._pending = 0
+            if not realtime:
+                self._pending += 1
+            elif self._running and self._may_step():
                 for i in range(steps):
                     if i and self._done():        # the duration ended within the backlog's steps
                         break
@@ -445,7 +461,12 @@ class Stepper:
                     new, self._new_command = self._new_command, False   # the answer is the last state
                     self._step_paced(answered=False)
                     self._new_command = new
-        if snap is None:
+            else:
+                # the twin is ahead of the wall clock: the command waits for the next step, the next
+                # command's or the idle one (never an earlier one: COMMAND_LEAD); its event waits in
+                # the outbox for that step's wake of the publisher
+                self.stats.commands_waited += 1
+        if not realtime:
             self.wake.set()      # the stepping thread steps for it and wakes the publisher when due
         return snap
 
@@ -527,17 +548,17 @@ class Stepper:
             while True:
                 wake.clear()
                 n = self._n            # a command may have taken this step on its own thread
-                earliest = self._t0 + (n + 1 - self._command_lead) * dt       # for a waiting command
+                # a command the lead kept from stepping (the twin was ahead) waits for this step
+                # too, or for the next command's: see COMMAND_LEAD
                 latest = self._t0 + (n + 1) * dt - margin
                 now = clock()
-                pending = self._pending
-                if now >= latest or (pending and now >= earliest):
+                if now >= latest:
                     break
                 if self.stop_event.is_set():
                     return
                 if self._held:
                     break
-                wake.wait((earliest if pending else latest) - now)
+                wake.wait(latest - now)
             if now >= latest + margin:        # behind: the deadline has passed already
                 wake.wait(BEHIND_PAUSE)
             with lock:

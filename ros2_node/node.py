@@ -861,6 +861,7 @@ class TwinNode:
             "jit_warmup_s": self.warmup_s, "deadline_misses": st.deadline_misses, "overruns": st.overruns,
             "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
+            "commands_waited": st.commands_waited,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
             "newton_iterations": _iterations(self.stepper.iterations),
             "deadline_slack_s": self.stepper.lateness.percentiles((1, 50), sign=-1.0),

@@ -219,6 +219,35 @@ def test_a_backlogs_newest_command_runs_the_steps_of_all_in_realtime(stewart, mo
     assert lock._pending == 1
 
 
+def test_a_command_finding_the_twin_at_its_lead_waits_for_the_next_step(stewart, monkeypatch):
+    """Realtime: a command that finds the twin COMMAND_LEAD steps ahead of the wall clock is applied
+    and recorded but runs no step and wakes no thread; the next command's step answers both, its
+    latency counted from the older one's reception. (Stepping the waiting command at the first
+    moment the lead allowed kept a 1 kHz stream at the lead for good: every command then waited.)"""
+    import time
+    import types
+
+    import flexmb_io.realtime as R
+    model, program = stewart
+    command = {"data": list(program.command_lengths(0.0))}
+    runner, st = _stepper(model, mode="realtime")
+    st.cfg.publish_on_command = True
+    st._running = True
+    now = time.perf_counter()
+    monkeypatch.setattr(R, "time", types.SimpleNamespace(perf_counter=lambda: now))   # the clock stands
+    st._t0 = now - (st._n + 0.5 - st._command_lead) * runner.dt   # the step to n + 1 not allowed yet
+    st.wake.clear()
+    assert st.submit("/t", "commands", command, now - 2e-4) is None
+    assert runner.counters.steps == 0 and runner.schedule.accepted == 1 and st.outbox[-1][0] == "cmd"
+    assert not st.wake.is_set()                      # nothing steps it before the next step
+    assert st.stats.commands_waited == 1
+    st._t0 -= runner.dt                              # a period later: one step allowed
+    snap = st.submit("/t", "commands", command, now)
+    assert runner.counters.steps == 1 and snap is not None and snap.answered and snap.on_command
+    assert snap.cmd_recv_wall == now - 2e-4          # the oldest command the state answers
+    assert not st.wake.is_set()
+
+
 def test_frames_prefix_the_platform_frames_only(stewart):
     from ros2_node.node import frame_prefix
     assert frame_prefix("auto", "/") == "" and frame_prefix("auto", "/robot1") == "robot1/"
