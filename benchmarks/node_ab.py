@@ -61,7 +61,10 @@ def write(rows: dict[str, list[dict]], variants, args) -> None:
              f"{os.cpu_count()} cores; load average at the start {args.load_start[0]:.2f}, at the end "
              f"{os.getloadavg()[0]:.2f}. `flexmb demo`, realtime, Δt = 1 ms, {args.rate:g} stamped commands/s, "
              f"{args.seconds:g} s per run, {args.rounds} rounds, the variants in turn (reversed every "
-             "other round).", "", "| variant | scene | tree | flags |", "|---|---|---|---|"]
+             "other round).", ""]
+    if args.note:
+        lines += [args.note, ""]
+    lines += ["| variant | scene | tree | flags |", "|---|---|---|---|"]
     for label, tree, flags, case in variants:
         lines.append(f"| {label} | `{NL.CASES[case][0]}` ({NL.CASES[case][1]}) | `{tree}` | "
                      f"`{' '.join(flags) or '(defaults)'}` |")
@@ -93,6 +96,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=20.0, help="s of simulated time per run")
     ap.add_argument("--rate", type=float, default=1000.0, help="the player's commands per second")
     ap.add_argument("--name", default="node_ab", help="report name: docs/benchmarks/NAME.{md,json}")
+    ap.add_argument("--note", default="", help="a paragraph under the heading: what the variants are")
     args = ap.parse_args()
     variants = [parse_variant(v, args.case) for v in args.variant]
     if len({v[0] for v in variants}) != len(variants):

@@ -10,7 +10,7 @@ Two kinds of run, interleaved round by round so that a busy machine slows both a
   Δt = 1 ms, the Stewart appendix commands at 1 kHz.
 
 Latency is measured by the player in both: from publishing a command to receiving the status that
-echoes its stamp. Then one long **soak** of the twin (default 10 min) counts missed deadlines and
+echoes its stamp (or a newer one). Then one long **soak** of the twin (default 10 min) counts missed deadlines and
 the node's CPU time beyond its solver steps. Writes ``docs/benchmarks/node.json`` and ``node.md``.
 
     .venv/bin/python benchmarks/node_latency.py [--seconds 20] [--rounds 3] [--soak 600]
@@ -163,7 +163,8 @@ def write(rounds: list[dict], soak: dict | None, extra: list[dict], jitter: dict
         f"defaults (publish_rate 100 Hz, joint states and status also on every new command, rt_priority "
         f"{args.rt_priority if args.rt_priority is not None else '-1: SCHED_FIFO 20 where allowed'}, step_margin "
         f"{args.step_margin if args.step_margin is not None else 0.0004:g} s). "
-        "Latency: the player publishes a command → it receives the status echoing the command's stamp. "
+        "Latency: the player publishes a command → it receives the first status echoing the command's stamp "
+        "or a newer one (the twin echoes the newest command a state includes). "
         "The ping-pong is `benchmarks/dds_echo.py`: the same client, messages, QoS and executor, no solver.",
         "",
         f"## Latency: {args.rounds} interleaved rounds of {args.seconds:g} s",

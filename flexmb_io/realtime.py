@@ -58,14 +58,14 @@ _PR_SET_TIMERSLACK = 29
 # runs at this lead: the steps that commands run then end up to the lead minus a period before their
 # deadline, and a command that finds the twin at the lead waits for the next step — the next
 # command's, or the idle step at its usual time. Never for the first moment the lead allows: that
-# kept the twin at the lead for good, every later command waiting for the clock too (12–73 % of a
-# 1 kHz stream's commands, 2026-11-29). Measured then (bar legs and 1-element frame legs with the
-# truss platform, 1 kHz stamped commands, interleaved 20 s runs, docs/benchmarks/node_ab_lead.md):
-# with a lead of 2 the commands that waited fell from thousands to 28–270 of 20 000 and the latency
-# p50 by 0.04–0.23 ms, but the missed deadlines rose (steps a command runs at the lead end 2 − φ
-# periods before their deadline, φ the command's phase in its period); 3 and 4 gave both back, 4
-# the most: 0–6 missed against 14–63 before, 2–22 commands waited, latency p99 1.8–2.7 ms against
-# 2.2–3.9. The price: a command acts on the twin's time, up to this many steps ahead of its arrival.
+# kept the twin at the lead for good, every later command waiting for the clock too. Measured
+# (docs/benchmarks/node_ab_lead.md: bar legs and the demo's frame legs, 1 kHz stamped commands, 3
+# interleaved 20 s rounds, medians, bars / frame legs): that earlier rule (lead 2) made 16 359 / 14 926 of
+# ~20 400 commands wait, missed 28 / 26 deadlines, latency p50 0.94 / 0.97 ms, p99 5.2 / 3.3 ms, CPU
+# beyond the solver 61 % of a core; this rule with a lead of 2: 314 / 362 waited, p50 0.70 / 0.71 ms,
+# but 80 / 83 missed (the steps that commands run at the lead end as little as one period before
+# their deadline); with 4: 11 / 7 waited, 6 / 9 missed, p50 0.69 / 0.72 ms, p99 2.8 / 3.0 ms, 51–52 %.
+# The price: a command acts on the twin's time, up to this many steps ahead of its arrival.
 COMMAND_LEAD = 4
 # s the stepping thread blocks before each step while it is behind the wall clock: a twin that
 # cannot keep up (and on SCHED_FIFO would never leave its core) still lets the executor, the
