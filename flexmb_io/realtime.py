@@ -197,6 +197,10 @@ class StepperStats:
     stalled_drops: int = 0           # publications and /clock events not queued: the outbox was full
     recent_misses: int = 0           # deadline misses within the last ``window`` steps
     commands_waited: int = 0         # realtime commands that found the twin at its lead: no step of their own
+    # misses whose step began after its deadline already: the thread came to it late (the host, or the
+    # process, held the twin up: a burst of them follows a stall); the others began in time and
+    # overran (the step itself, or a preemption within it, took longer than its slack)
+    misses_started_late: int = 0
 
     @property
     def dropped_publications(self) -> int:
@@ -616,6 +620,8 @@ class Stepper:
             ring[i] = missed
             if missed:
                 self.stats.deadline_misses += 1
+                if a > deadline:
+                    self.stats.misses_started_late += 1
         if outcome.advanced:
             self.stats.steps_advanced += 1
         k = self.stats.steps_advanced

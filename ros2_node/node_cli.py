@@ -156,6 +156,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
             " — the twin kept real time" if misses == 0 else
             f" ({100.0 * misses / max(n['steps'], 1):.2f} %) — MISSED DEADLINES: the twin fell behind the wall "
             f"clock {misses} times ({n['overruns']} re-anchored); see the node's warnings above"))
+        if misses and "deadline_misses_started_late" in n:
+            print(f"  of the missed: {n['deadline_misses_started_late']} began after their deadline (the host or "
+                  f"the process held the twin up), {n['deadline_misses_overran']} began in time and overran")
         if "step_margin_s" in n:
             print(f"  idle steps start {_fmt_ms(n['step_margin_s'])} before their deadline ("
                   + ("automatic: the steps' own p99.9 wall time + 0.2 ms" if n.get("step_margin_auto")

@@ -3,6 +3,7 @@ repeats the start bit for bit, the stepper's hold / step N / reset, frame ids an
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -246,6 +247,26 @@ def test_a_command_finding_the_twin_at_its_lead_waits_for_the_next_step(stewart,
     assert runner.counters.steps == 1 and snap is not None and snap.answered and snap.on_command
     assert snap.cmd_recv_wall == now - 2e-4          # the oldest command the state answers
     assert not st.wake.is_set()
+
+
+def test_a_missed_deadline_is_told_apart_by_when_its_step_began(stewart, monkeypatch):
+    """A miss whose step began after its deadline counts as started late (the thread came to it
+    late); one that began in time and ended after it, as overran (``deadline_misses`` − started)."""
+    import itertools
+    import types
+
+    import flexmb_io.realtime as R
+    model, _ = stewart
+    runner, st = _stepper(model, mode="realtime")
+    ticks = itertools.count()                  # perf_counter: 0, 1, 2, … s, one per call
+    monkeypatch.setattr(R, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
+    st._step(-1.0)                             # began at 0 s, after its deadline
+    assert (st.stats.deadline_misses, st.stats.misses_started_late) == (1, 1)
+    start = next(ticks) + 1                    # the next step begins at this tick and ends after it
+    st._step(start + 0.5)                      # began in time, ended late
+    assert (st.stats.deadline_misses, st.stats.misses_started_late) == (2, 1)
+    st._step(math.inf)                         # unpaced (lockstep, ~/step): no deadline
+    assert st.stats.deadline_misses == 2
 
 
 def test_frames_prefix_the_platform_frames_only(stewart):
