@@ -203,6 +203,11 @@ class StepperStats:
     misses_started_late: int = 0
 
     @property
+    def misses_overran(self) -> int:
+        """Deadline misses whose step began in time and ended late."""
+        return self.deadline_misses - self.misses_started_late
+
+    @property
     def dropped_publications(self) -> int:
         """Publications never made: lapped in the ring, or not queued into a full outbox."""
         return self.dropped_snapshots + self.stalled_drops
@@ -300,8 +305,7 @@ class Stepper:
         # ("clock", t), in the order things happened (appended under the lock)
         self.outbox: collections.deque = collections.deque()
         self._lock = threading.Lock()         # a command application and a step exclude each other
-        self._pending = 0                     # commands applied since the last step began
-        # steps ahead of the wall clock a command may take the twin: COMMAND_LEAD beyond the idle lead
+        self._pending = 0                     # lockstep: commands applied that still owe their step
         self.margin = config.margin           # s, in force (auto_margin sets it when margin_auto)
         if config.margin_auto:
             # no step measured yet: the widest margin of the rule until AUTO_MARGIN_EVERY steps are.
@@ -310,7 +314,6 @@ class Stepper:
             # first 300 steps missed 2–23 deadlines per run starting at the configured 0.4 ms, 0–1
             # starting at this
             self.margin = auto_margin(math.inf, config.margin, self.dt)
-        self._command_lead = COMMAND_LEAD + int(self.margin // self.dt)
         self.wake = threading.Event()
         self._ready = threading.Event()
         self._t0 = 0.0                        # wall time of state 0 (perf_counter; re-anchored on overruns)
@@ -474,6 +477,12 @@ class Stepper:
             self.wake.set()      # the stepping thread steps for it and wakes the publisher when due
         return snap
 
+    @property
+    def _command_lead(self) -> int:
+        """Steps ahead of the wall clock a command may take the twin: COMMAND_LEAD beyond the
+        idle steps' lead (the margin in force, in whole steps)."""
+        return COMMAND_LEAD + int(self.margin // self.dt)
+
     def _may_step(self, ahead: int = 0) -> bool:
         """Whether a command may run the step to state n + 1 + ``ahead`` now (under the lock): the
         twin is then at most the command lead ahead of the wall clock."""
@@ -529,7 +538,6 @@ class Stepper:
             return
         p999 = self.step_walls.percentiles((99.9,), last=window)["p99.9"]
         self.margin = auto_margin(p999, self.cfg.margin, self.dt)
-        self._command_lead = COMMAND_LEAD + int(self.margin // self.dt)
 
     def _loop_realtime(self) -> None:
         dt = self.dt
@@ -568,7 +576,6 @@ class Stepper:
             with lock:
                 # else a command's thread stepped meanwhile, or the twin was held
                 if self._n == n and not self._done() and not self._held:
-                    self._pending = 0
                     self._step_paced(answered=False)
 
     def _step_paced(self, answered: bool) -> Snapshot | None:

@@ -265,6 +265,7 @@ def test_a_missed_deadline_is_told_apart_by_when_its_step_began(stewart, monkeyp
     start = next(ticks) + 1                    # the next step begins at this tick and ends after it
     st._step(start + 0.5)                      # began in time, ended late
     assert (st.stats.deadline_misses, st.stats.misses_started_late) == (2, 1)
+    assert st.stats.misses_overran == 1
     st._step(math.inf)                         # unpaced (lockstep, ~/step): no deadline
     assert st.stats.deadline_misses == 2
 
