@@ -21,13 +21,14 @@ import json
 import os
 import shlex
 import statistics
+import subprocess
 import sys
 from pathlib import Path
 
 import node_latency as NL
 
 # flattened summary keys reported, with their table headers
-COLUMNS = (("deadline_misses", "missed deadlines"), ("steps", "steps"), ("step_margin_ms", "margin in force (ms)"),
+COLUMNS = (("deadline_misses", "missed deadlines"), ("misses_started_late", "of which began late"), ("steps", "steps"), ("step_margin_ms", "margin in force (ms)"),
            ("latency_p50_ms", "latency p50 (ms)"), ("latency_p99_ms", "latency p99 (ms)"),
            ("node_internal_latency_p99_ms", "in-node latency p99 (ms)"), ("commands_waited", "commands that waited"),
            ("step_wall_p99_ms", "step p99 (ms)"), ("cpu_beyond_solver_core", "CPU beyond solver (core)"))
@@ -61,7 +62,8 @@ def write(rows: dict[str, list[dict]], variants, args) -> None:
              f"{os.cpu_count()} cores; load average at the start {args.load_start[0]:.2f}, at the end "
              f"{os.getloadavg()[0]:.2f}. `flexmb demo`, realtime, Δt = 1 ms, {args.rate:g} stamped commands/s, "
              f"{args.seconds:g} s per run, {args.rounds} rounds, the variants in turn (reversed every "
-             "other round).", ""]
+             "other round)." + (f" {args.load} busy loop{'s' * (args.load > 1)} on the normal scheduler ran "
+                                 "through all the rounds." if args.load else ""), ""]
     if args.note:
         lines += [args.note, ""]
     lines += ["| variant | scene | tree | flags |", "|---|---|---|---|"]
@@ -97,17 +99,25 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=1000.0, help="the player's commands per second")
     ap.add_argument("--name", default="node_ab", help="report name: docs/benchmarks/NAME.{md,json}")
     ap.add_argument("--note", default="", help="a paragraph under the heading: what the variants are")
+    ap.add_argument("--load", type=int, default=0, metavar="N",
+                    help="N busy loops (processes on the normal scheduler, unpinned) run through all the rounds: "
+                         "a machine that other work keeps busy")
     args = ap.parse_args()
     variants = [parse_variant(v, args.case) for v in args.variant]
     if len({v[0] for v in variants}) != len(variants):
         raise SystemExit("--variant: the labels must differ")
     args.load_start = os.getloadavg()
     rows: dict[str, list[dict]] = {v[0]: [] for v in variants}
-    for k in range(args.rounds):
-        for label, tree, flags, case in (variants if k % 2 == 0 else variants[::-1]):
-            r = NL.run_twin(case, args.seconds, None, args.rate, extra_args=flags, tree=tree, label=label)
-            rows[label].append(r)
-            print(json.dumps({"round": k + 1, "variant": label} | r), flush=True)
+    load = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.load)]
+    try:
+        for k in range(args.rounds):
+            for label, tree, flags, case in (variants if k % 2 == 0 else variants[::-1]):
+                r = NL.run_twin(case, args.seconds, None, args.rate, extra_args=flags, tree=tree, label=label)
+                rows[label].append(r)
+                print(json.dumps({"round": k + 1, "variant": label} | r), flush=True)
+    finally:
+        for p in load:
+            p.kill()
     write(rows, variants, args)
     print(f"wrote {NL.DOCS / (args.name + '.md')}")
     return 0

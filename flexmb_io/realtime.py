@@ -128,6 +128,58 @@ def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> tuple[li
     return warnings, notes
 
 
+# SCHED_FIFO priority of the node's other threads that take the GIL (the executor, which applies
+# commands and runs their steps under the step lock, and the publisher) with ``rt_threads: node``,
+# this far below the stepping thread's (never below 1). A thread on the normal scheduler that holds
+# the GIL or the step lock when the kernel preempts it for another process holds up the stepping
+# thread for the rest of a time slice, whatever the stepping thread's own priority: measured with
+# probes (2026-11-29, bar legs at 1 kHz), a command's step on the executor took 4.8 ms instead of
+# 0.1 while a SCHED_FIFO thread of the same process that needs the GIL woke 3.9 ms late and one that
+# does not was on time, and a burst of missed deadlines followed. On SCHED_FIFO a thread is
+# preempted only by one of higher priority; the stepping thread, which preempts them, then waits for
+# the GIL at most the switch interval. (The middleware's own threads never take the GIL and keep
+# the normal scheduler.) Measured, interleaved (docs/benchmarks/node_ab_rt_threads*.md, medians):
+# with two busy loops on the machine 251 against 389 missed deadlines in 30 s, in-node latency p99
+# 1.4 against 6.3 ms; on an idle machine the same few misses (1 against 3) but a longer latency
+# tail at the client (p99 2.2 against 1.6 ms; not pinned down: the client's threads, on the normal
+# scheduler, yielding the cores to the node's is a likely cause), so it is not the default.
+HELPER_PRIORITY_BELOW = 1
+
+
+def helper_priority(stepping_priority: int) -> int:
+    """SCHED_FIFO priority of the node's other GIL threads for a stepping thread on
+    ``stepping_priority`` (0: the stepping thread runs on the normal scheduler, and so do they)."""
+    return max(1, stepping_priority - HELPER_PRIORITY_BELOW) if stepping_priority > 0 else 0
+
+
+def raise_to_fifo(priority: int) -> tuple[int, os.sched_param] | None:
+    """Put the calling thread on SCHED_FIFO ``priority``. Returns its scheduling before (for
+    :func:`restore_scheduling`), or None where the OS refuses (no CAP_SYS_NICE or rtprio limit)."""
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError):
+        return None
+    return before
+
+
+def restore_scheduling(before: tuple[int, os.sched_param] | None) -> None:
+    """Put the calling thread back on the scheduling :func:`raise_to_fifo` returned."""
+    if before is not None:
+        try:
+            os.sched_setscheduler(0, *before)
+        except OSError:
+            pass
+
+
+def fifo_priority_in_force() -> int:
+    """The calling thread's SCHED_FIFO priority, 0 when it runs on another policy."""
+    try:
+        return os.sched_getparam(0).sched_priority if os.sched_getscheduler(0) == os.SCHED_FIFO else 0
+    except (OSError, AttributeError):
+        return 0
+
+
 @dataclass
 class Snapshot:
     """One published step: the state after it and what the publisher needs to report it.
@@ -334,6 +386,7 @@ class Stepper:
         self._cmd_recv_wall = 0.0
         self.warnings: list[str] = []        # what the OS refused of an explicit request
         self.notes: list[str] = []           # how the stepping thread is scheduled
+        self.fifo_priority = 0               # the stepping thread's SCHED_FIFO priority once started (0: none)
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._main, name="flexmb-step", daemon=True)
 
@@ -515,6 +568,7 @@ class Stepper:
                 warnings, notes = apply_thread_scheduling(self.cfg.cpu_affinity, self.cfg.rt_priority)
                 self.warnings += warnings
                 self.notes += notes
+                self.fifo_priority = fifo_priority_in_force()
             self._ready.set()
             if self.cfg.mode == "lockstep":
                 self._loop_lockstep()

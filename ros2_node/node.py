@@ -48,7 +48,8 @@ from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
 from flexmb_io import messages as M
 from flexmb_io import topics as T
-from flexmb_io.realtime import Samples, Snapshot, Stepper, StepperConfig
+from flexmb_io.realtime import (Samples, Snapshot, Stepper, StepperConfig, fifo_priority_in_force,
+                                helper_priority, raise_to_fifo, restore_scheduling)
 from flexmb_io.shells import ShellShapes
 from flexmb_io.twin import RunnerOptions, TwinRunner
 from flexmb_io.wire import serialize
@@ -146,6 +147,9 @@ class TwinNode:
         self._command_subs: list = []             # (topic, kind, subscription) of the command inputs
         self._diag = None
         self._threads_started = False
+        self._helper_fifo = 0               # SCHED_FIFO priority of the executor and publisher threads (0: none)
+        self._executor_fifo = self._publisher_fifo = 0   # as each of them found it in force
+        self._executor_sched = None         # the executor thread's scheduling before, restored at the end
         self._publisher = None
         self._summary: dict | None = None
         self._configure_error: BaseException | None = None
@@ -371,12 +375,32 @@ class TwinNode:
         self._cpu_start = time.process_time()
         self._rss_start = self._rss_now = self._rss_max = _rss_mb()
         self.stepper.start()
+        self._raise_helpers()
         self._publisher.start()
         self._threads_started = True
         for w in self.stepper.warnings:
             self.log.warning(w)
         for note in self.stepper.notes:
             self.log.info(note)
+
+    def _raise_helpers(self) -> None:
+        """``rt_threads: node``: the executor (this thread: the node starts its threads from it, at
+        start or on the lifecycle's activation) and the publisher on SCHED_FIFO just below the stepping
+        thread, which waits for them when they hold the GIL or the step lock (see
+        :data:`flexmb_io.realtime.HELPER_PRIORITY_BELOW`)."""
+        self._helper_fifo = 0
+        if self.p.mode != "realtime" or self.p.rt_threads != "node" or not self.stepper.fifo_priority:
+            return
+        prio = helper_priority(self.stepper.fifo_priority)
+        self._executor_sched = raise_to_fifo(prio)
+        if self._executor_sched is None:
+            self.stepper.warnings.append(f"the executor thread could not join the stepping thread on SCHED_FIFO "
+                                         f"(priority {prio}); it keeps the normal scheduler")
+            return
+        self._executor_thread = threading.get_ident()
+        self._executor_fifo = fifo_priority_in_force()
+        self._helper_fifo = prio
+        self.stepper.notes.append(f"executor and publisher threads on SCHED_FIFO priority {prio}")
 
     def _stop_threads(self) -> None:
         if not self._threads_started:
@@ -385,6 +409,9 @@ class TwinNode:
         self.wall_stop = time.perf_counter()
         self._publisher.join(10.0)
         self._drain_outbox()            # anything the publisher had not reached (it stopped)
+        if self._executor_sched is not None and threading.get_ident() == self._executor_thread:
+            restore_scheduling(self._executor_sched)
+            self._executor_sched = None
         sys.setswitchinterval(self._switch)
         gc.unfreeze()
         self._threads_started = False
@@ -740,6 +767,9 @@ class TwinNode:
 
     def _publisher_main(self) -> None:
         """The publisher thread: publish what the stepping thread queues, report health."""
+        if self._helper_fifo:
+            raise_to_fifo(self._helper_fifo)
+        self._publisher_fifo = fifo_priority_in_force()
         period = 1.0 / self.p.diagnostics_rate if self.p.diagnostics_rate > 0 else math.inf
         next_diag = time.perf_counter() + period
         last_beat = time.perf_counter()
@@ -862,6 +892,8 @@ class TwinNode:
             "deadline_misses_started_late": st.misses_started_late,
             "deadline_misses_overran": st.misses_overran, "overruns": st.overruns,
             "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
+            "fifo_priority": {"stepping": self.stepper.fifo_priority, "executor": self._executor_fifo,
+                              "publisher": self._publisher_fifo},
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "commands_waited": st.commands_waited,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),

@@ -21,7 +21,7 @@ from flexmb_io import topics as T
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
                "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
-               "step-margin", "cpu-affinity", "rt-priority", "diagnostics-rate", "clock-rate", "world-frame",
+               "step-margin", "cpu-affinity", "rt-priority", "rt-threads", "diagnostics-rate", "clock-rate", "world-frame",
                "frame-prefix")
 # exit code of a node stopped by SIGINT/SIGTERM (after closing its recording and writing its summary)
 INTERRUPTED = 130
@@ -104,6 +104,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--rrd", args.rrd]
     if args.rt_priority is not None:
         node_cmd += ["--rt-priority", str(args.rt_priority)]
+    if args.rt_threads:
+        node_cmd += ["--rt-threads", args.rt_threads]
     if args.cpu_affinity:
         node_cmd += ["--cpu-affinity", args.cpu_affinity]
     if args.step_margin is not None:
@@ -222,6 +224,8 @@ def register(verbs, run_parser) -> None:
     n.add_argument("--cpu-affinity", help="realtime: CPU ids of the stepping thread, e.g. 1 or 0,1")
     n.add_argument("--rt-priority", type=int, help="realtime: SCHED_FIFO priority 1-99 of the stepping thread "
                    "(0: normal scheduling; default -1: 20 where the OS allows it)")
+    n.add_argument("--rt-threads", choices=("stepping", "node"), help="realtime: stepping (default): the stepping "
+                   "thread alone on SCHED_FIFO; node: the executor and publisher threads too, one priority below it")
     n.add_argument("--diagnostics-rate", type=float, help="Hz of /diagnostics (default 1; 0 disables)")
     n.add_argument("--clock-rate", type=float, help="Hz (simulated time) of /clock (default 100)")
     n.add_argument("--world-frame", help="frame_id of headers, parent of the /tf transforms (default world)")
@@ -268,6 +272,8 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--mcap", metavar="DIR", help="record the node's run here")
     d.add_argument("--rrd", metavar="OUT")
     d.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority of the node's stepping thread")
+    d.add_argument("--rt-threads", choices=("stepping", "node"), help="the node's rt_threads: stepping (default: "
+                   "only the stepping thread on SCHED_FIFO) or node (the executor and publisher threads too)")
     d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
     d.add_argument("--step-margin", type=float, help="s before its deadline at which the node's idle step "
                    "starts (the node's step_margin; more than Δt keeps the twin ahead of the wall clock)")

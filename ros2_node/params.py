@@ -92,6 +92,11 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("rt_priority", -1, "realtime: SCHED_FIFO priority of the stepping thread (1-99; 0 = the normal "
               "scheduler; -1 = 20 where the OS allows it, else the normal scheduler, said once at INFO level); an "
               "explicit priority the OS refuses (no CAP_SYS_NICE or rtprio limit) gives a warning", low=-1, high=99),
+    ParamSpec("rt_threads", "stepping", "realtime: which threads rt_priority puts on SCHED_FIFO: stepping (default): "
+              "the stepping thread alone; node: also the node's other threads that take the GIL (the executor, the "
+              "publisher), one priority below it, so that no other process preempts a thread the stepping thread "
+              "waits for (fewer missed deadlines on a busy machine, a longer latency tail on an idle one)",
+              choices=("stepping", "node")),
     ParamSpec("diagnostics_rate", 1.0, "rate (Hz of wall time) of /diagnostics; 0 disables", low=0.0, high=100.0),
     ParamSpec("record", "", "record inputs and outputs to this rosbag2/MCAP directory ('' = none)"),
     ParamSpec("rrd", "", "log the twin to this rerun .rrd file ('' = none)"),
@@ -135,6 +140,7 @@ class NodeParams:
     step_margin_auto: bool = True
     cpu_affinity: str = ""
     rt_priority: int = -1
+    rt_threads: str = "stepping"
     diagnostics_rate: float = 1.0
     record: str = ""
     rrd: str = ""

@@ -53,12 +53,17 @@ def test_an_overloaded_twin_reports_that_it_is_behind(tmp_path, dds_env):
 
 
 @pytest.mark.timeout(120)
-def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env):
+@pytest.mark.parametrize("rt_threads", ["node", "stepping"])
+def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env, rt_threads):
     """At the scene's Δt the bar twin keeps real time; the summary carries the deadline slack, the
-    step wall times and the node's CPU beyond its solver, and /diagnostics says OK for the solver."""
+    step wall times and the node's CPU beyond its solver, and /diagnostics says OK for the solver.
+    Its threads' scheduling as each found it in force: with ``rt_threads: node`` the executor and the
+    publisher one SCHED_FIFO priority below the stepping thread, with ``stepping`` on the normal
+    scheduler (all of them there where the OS allows no SCHED_FIFO)."""
     summary = tmp_path / "s.json"
     node = NodeProcess([SCENE, "--mode", "realtime", "--duration", "6", "--diagnostics-rate", "5",
-                        "--summary-json", str(summary), "--quiet"], dds_env, tmp_path / "node.log")
+                        "--rt-threads", rt_threads, "--summary-json", str(summary), "--quiet"], dds_env,
+                       tmp_path / "node.log")
     client = TwinClient()
     try:
         client.wait_for_twin(node)
@@ -74,6 +79,9 @@ def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env):
     assert cpu["process"] > cpu["solver_steps"] > 0
     solver = [st for d in client.received[T.DIAGNOSTICS.name] for st in d.status if st.name.endswith(": solver")]
     assert solver and all(st.level == OK for st in solver)
+    fifo = s["fifo_priority"]
+    helpers = fifo["stepping"] - 1 if fifo["stepping"] and rt_threads == "node" else 0
+    assert fifo["executor"] == fifo["publisher"] == helpers, fifo
 
 
 @pytest.mark.timeout(180)
