@@ -61,6 +61,17 @@ from .taking import TAKE_MAX, take_waiting_received
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
 _SWITCH_INTERVAL = 5.0e-5
+# s of wall time the publisher thread may spend, per pass over its queue, waiting for the executor
+# to finish handling a command before it builds its next message. The GIL has no priorities: a
+# publication (the reporter's read and six messages, ≈ 0.18 ms of CPU at 100 Hz on the bar twin)
+# that overlaps a command takes the GIL from the command's path every switch interval, which
+# lengthens the answer's latency and the command's step. Measured (bar legs at 1 kHz, 30 s rounds,
+# interleaved): publish_rate 10 instead of 100 gave in-node latency p99 0.33–0.53 ms against
+# 0.46–1.24, client p99 1.2–2.4 ms against 1.5–3.6 (docs/benchmarks/node_ab_publish_rate.md); this
+# wait, at 100 Hz, client p99 1.34–1.95 ms against 1.65–2.22, lower in each of 4 rounds, in-node
+# p99 0.32–0.52 against 0.48–0.71 (node_ab_yield.md). Bounded, so that a node whose executor never
+# rests (an overload) still publishes and records everything, only later.
+_COMMAND_YIELD = 1.0e-3
 # s of wall time between two status messages of an idle lockstep twin
 _HEARTBEAT = 0.2
 # s of wall time between two looks at which output topics have subscribers
@@ -175,6 +186,12 @@ class TwinNode:
         self._draining = False                  # executor: _take_commands is spinning
         self.commands_lost: dict[str, int] = {}      # resolved command topic → messages lost before delivery
         self._out_event = threading.Event()
+        # set while the executor handles no command (cleared by a command's callback, set again
+        # after the spin that ran it): the publisher thread waits for it between two messages
+        self._commands_idle = threading.Event()
+        self._commands_idle.set()
+        self._publisher_ident = None
+        self._yield_until = 0.0            # the publisher's wait budget of its current pass (perf_counter)
         # held by the executor thread from a command's reception until its answer is complete: the
         # publisher records an answered state only after its answer (it records the answer's bytes)
         self._answering = threading.Lock()
@@ -477,6 +494,7 @@ class TwinNode:
         first of them, and all are filed with their receptions for :meth:`_take_commands` (after
         this spin), the first at the earlier of the callback's time and the next one's reception."""
         t_recv = time.perf_counter()
+        self._commands_idle.clear()
         if self._draining:
             self._inbox.append((topic, kind, msg, t_recv))
             return
@@ -597,11 +615,21 @@ class TwinNode:
         live = pub is not None and self._live and self._listened.get(topic.name, True)
         if not live and self.recorder is None:
             return
+        self._yield_to_commands()
         data = serialize(topic.type, build())
         if live:
             pub.publish(data)
         if self.recorder is not None:
             self.recorder.write_cdr(self._resolved(topic), topic.type, data, t)
+
+    def _yield_to_commands(self) -> None:
+        """On the publisher thread, before a piece of its work: while the executor handles a command,
+        wait for it (GIL released), within the pass's budget (:data:`_COMMAND_YIELD`)."""
+        if self._commands_idle.is_set() or threading.get_ident() != self._publisher_ident:
+            return
+        wait = self._yield_until - time.perf_counter()
+        if wait > 0.0:
+            self._commands_idle.wait(wait)
 
     def _rtf(self) -> float:
         w = self._rtf_window
@@ -654,6 +682,7 @@ class TwinNode:
             self._record_answer(answer, t)
             self._last_sample = snap
             return
+        self._yield_to_commands()
         view = self._view
         view.state, view.last = snap.state, snap.result if snap.result is not None else view.last
         full = bool(snap.due or snap.shape_due)
@@ -713,6 +742,7 @@ class TwinNode:
         publisher fell behind), only the newest goes out live — the older ones are stale by then —
         and every one is still recorded. Returns how many events were handled."""
         out = self.stepper.outbox
+        self._yield_until = time.perf_counter() + _COMMAND_YIELD
         events = []
         while out:
             events.append(out.popleft())
@@ -770,6 +800,7 @@ class TwinNode:
         if self._helper_fifo:
             raise_to_fifo(self._helper_fifo)
         self._publisher_fifo = fifo_priority_in_force()
+        self._publisher_ident = threading.get_ident()
         period = 1.0 / self.p.diagnostics_rate if self.p.diagnostics_rate > 0 else math.inf
         next_diag = time.perf_counter() + period
         last_beat = time.perf_counter()
@@ -859,6 +890,8 @@ class TwinNode:
                 self.executor.spin_once(timeout_sec=0.05)
                 if self._took and DRAIN_HISTORIES:
                     self._take_commands()
+                if not self._commands_idle.is_set():
+                    self._commands_idle.set()
         except (KeyboardInterrupt, ExternalShutdownException):
             self.stop_requested = True
         finally:
