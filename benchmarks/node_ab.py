@@ -28,7 +28,8 @@ from pathlib import Path
 import node_latency as NL
 
 # flattened summary keys reported, with their table headers
-COLUMNS = (("deadline_misses", "missed deadlines"), ("misses_started_late", "of which began late"), ("steps", "steps"), ("step_margin_ms", "margin in force (ms)"),
+COLUMNS = (("deadline_misses", "missed deadlines"), ("misses_started_late", "of which began late"), ("steps", "steps"),
+           ("step_margin_ms", "margin in force (ms)"),
            ("latency_p50_ms", "latency p50 (ms)"), ("latency_p99_ms", "latency p99 (ms)"),
            ("node_internal_latency_p99_ms", "in-node latency p99 (ms)"), ("commands_waited", "commands that waited"),
            ("step_wall_p99_ms", "step p99 (ms)"), ("cpu_beyond_solver_core", "CPU beyond solver (core)"))
