@@ -14,14 +14,15 @@ from ros2_node.node import TwinNode  # noqa: E402
 
 
 def _node(on_publisher_thread: bool, budget_s: float) -> SimpleNamespace:
+    """What ``_yield_to_commands`` reads of a node whose executor is handling a command."""
     idle = threading.Event()               # cleared: the executor is handling a command
     return SimpleNamespace(_commands_idle=idle, _yield_until=time.perf_counter() + budget_s,
-                           _publisher_ident=threading.get_ident() if on_publisher_thread else -1)
+                           _publisher_ident=None, on_publisher_thread=on_publisher_thread)
 
 
 def _yield_in_thread(node: SimpleNamespace) -> threading.Thread:
     def run():
-        node._publisher_ident = threading.get_ident() if node._publisher_ident != -1 else -1
+        node._publisher_ident = threading.get_ident() if node.on_publisher_thread else -1
         TwinNode._yield_to_commands(node)
         node.returned_with_idle = node._commands_idle.is_set()
     t = threading.Thread(target=run)
