@@ -106,52 +106,6 @@ def timer_slack(ns: int) -> bool:
 AUTO_RT_PRIORITY = 20
 
 
-def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> tuple[list[str], list[str]]:
-    """Pin the calling thread to ``cpus`` and give it SCHED_FIFO ``rt_priority`` (0: normal
-    scheduling; −1: :data:`AUTO_RT_PRIORITY` if the OS allows it). Returns (warnings, notes): what
-    the OS refused of an explicit request, and what it refused of the automatic one."""
-    warnings, notes = [], []
-    if cpus:
-        try:
-            os.sched_setaffinity(0, set(cpus))
-        except (OSError, ValueError) as exc:
-            warnings.append(f"cpu_affinity {list(cpus)} not applied ({exc}); the step thread runs on any CPU")
-    if rt_priority != 0:
-        prio = AUTO_RT_PRIORITY if rt_priority < 0 else rt_priority
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-            notes.append(f"stepping thread on SCHED_FIFO priority {prio}")
-        except (OSError, AttributeError) as exc:
-            text = (f"rt_priority {prio} (SCHED_FIFO) not applied ({exc}): it needs CAP_SYS_NICE or an rtprio "
-                    "limit (ulimit -r); the stepping thread keeps the normal scheduler")
-            (notes if rt_priority < 0 else warnings).append(text)
-    return warnings, notes
-
-
-# SCHED_FIFO priority of the node's other threads that take the GIL (the executor, which applies
-# commands and runs their steps under the step lock, and the publisher) with ``rt_threads: node``,
-# this far below the stepping thread's (never below 1). A thread on the normal scheduler that holds
-# the GIL or the step lock when the kernel preempts it for another process holds up the stepping
-# thread for the rest of a time slice, whatever the stepping thread's own priority: measured with
-# probes (2026-11-29, bar legs at 1 kHz), a command's step on the executor took 4.8 ms instead of
-# 0.1 while a SCHED_FIFO thread of the same process that needs the GIL woke 3.9 ms late and one that
-# does not was on time, and a burst of missed deadlines followed. On SCHED_FIFO a thread is
-# preempted only by one of higher priority; the stepping thread, which preempts them, then waits for
-# the GIL at most the switch interval. (The middleware's own threads never take the GIL and keep
-# the normal scheduler.) Measured, interleaved (docs/benchmarks/node_ab_rt_threads*.md, medians):
-# with two busy loops on the machine 251 against 389 missed deadlines in 30 s, in-node latency p99
-# 1.4 against 6.3 ms; on an idle machine the same few misses (1 against 3) but a longer latency
-# tail at the client (p99 2.2 against 1.6 ms; not pinned down: the client's threads, on the normal
-# scheduler, yielding the cores to the node's is a likely cause), so it is not the default.
-HELPER_PRIORITY_BELOW = 1
-
-
-def helper_priority(stepping_priority: int) -> int:
-    """SCHED_FIFO priority of the node's other GIL threads for a stepping thread on
-    ``stepping_priority`` (0: the stepping thread runs on the normal scheduler, and so do they)."""
-    return max(1, stepping_priority - HELPER_PRIORITY_BELOW) if stepping_priority > 0 else 0
-
-
 def raise_to_fifo(priority: int) -> tuple[int, os.sched_param] | None:
     """Put the calling thread on SCHED_FIFO ``priority``. Returns its scheduling before (for
     :func:`restore_scheduling`), or None where the OS refuses (no CAP_SYS_NICE or rtprio limit)."""
@@ -178,6 +132,51 @@ def fifo_priority_in_force() -> int:
         return os.sched_getparam(0).sched_priority if os.sched_getscheduler(0) == os.SCHED_FIFO else 0
     except (OSError, AttributeError):
         return 0
+
+
+def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> tuple[list[str], list[str]]:
+    """Pin the calling thread to ``cpus`` and give it SCHED_FIFO ``rt_priority`` (0: normal
+    scheduling; −1: :data:`AUTO_RT_PRIORITY` if the OS allows it). Returns (warnings, notes): what
+    the OS refused of an explicit request, and what it refused of the automatic one."""
+    warnings, notes = [], []
+    if cpus:
+        try:
+            os.sched_setaffinity(0, set(cpus))
+        except (OSError, ValueError) as exc:
+            warnings.append(f"cpu_affinity {list(cpus)} not applied ({exc}); the step thread runs on any CPU")
+    if rt_priority != 0:
+        prio = AUTO_RT_PRIORITY if rt_priority < 0 else rt_priority
+        if raise_to_fifo(prio) is not None:
+            notes.append(f"stepping thread on SCHED_FIFO priority {prio}")
+        else:
+            text = (f"rt_priority {prio} (SCHED_FIFO) not applied: the OS refused it (it needs CAP_SYS_NICE or an "
+                    "rtprio limit, ulimit -r); the stepping thread keeps the normal scheduler")
+            (notes if rt_priority < 0 else warnings).append(text)
+    return warnings, notes
+
+
+# SCHED_FIFO priority of the node's other threads that take the GIL (the executor, which applies
+# commands and runs their steps under the step lock, and the publisher) with ``rt_threads: node``,
+# this far below the stepping thread's (never below 1). A thread on the normal scheduler that holds
+# the GIL or the step lock when the kernel preempts it for another process holds up the stepping
+# thread for the rest of a time slice, whatever the stepping thread's own priority: measured with
+# probes (2026-11-29, bar legs at 1 kHz), a command's step on the executor took 4.8 ms instead of
+# 0.1 while a SCHED_FIFO thread of the same process that needs the GIL woke 3.9 ms late and one that
+# does not was on time, and a burst of missed deadlines followed. On SCHED_FIFO a thread is
+# preempted only by one of higher priority; the stepping thread, which preempts them, then waits for
+# the GIL at most the switch interval. (The middleware's own threads never take the GIL and keep
+# the normal scheduler.) Measured, interleaved (docs/benchmarks/node_ab_rt_threads*.md, medians):
+# with two busy loops on the machine 251 against 389 missed deadlines in 30 s, in-node latency p99
+# 1.4 against 6.3 ms; on an idle machine the same few misses (1 against 3) but a longer latency
+# tail at the client (p99 2.2 against 1.6 ms; not pinned down: the client's threads, on the normal
+# scheduler, yielding the cores to the node's is a likely cause), so it is not the default.
+HELPER_PRIORITY_BELOW = 1
+
+
+def helper_priority(stepping_priority: int) -> int:
+    """SCHED_FIFO priority of the node's other GIL threads for a stepping thread on
+    ``stepping_priority`` (0: the stepping thread runs on the normal scheduler, and so do they)."""
+    return max(1, stepping_priority - HELPER_PRIORITY_BELOW) if stepping_priority > 0 else 0
 
 
 @dataclass

@@ -159,8 +159,9 @@ class TwinNode:
         self._diag = None
         self._threads_started = False
         self._helper_fifo = 0               # SCHED_FIFO priority of the executor and publisher threads (0: none)
-        self._executor_fifo = self._publisher_fifo = 0   # as each of them found it in force
+        self._publisher_fifo = 0            # the publisher's, as it found it in force
         self._executor_sched = None         # the executor thread's scheduling before, restored at the end
+        self._executor_thread = None        # the thread that raised it (only it can put it back)
         self._publisher = None
         self._summary: dict | None = None
         self._configure_error: BaseException | None = None
@@ -415,7 +416,6 @@ class TwinNode:
                                          f"(priority {prio}); it keeps the normal scheduler")
             return
         self._executor_thread = threading.get_ident()
-        self._executor_fifo = fifo_priority_in_force()
         self._helper_fifo = prio
         self.stepper.notes.append(f"executor and publisher threads on SCHED_FIFO priority {prio}")
 
@@ -925,7 +925,7 @@ class TwinNode:
             "deadline_misses_started_late": st.misses_started_late,
             "deadline_misses_overran": st.misses_overran, "overruns": st.overruns,
             "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
-            "fifo_priority": {"stepping": self.stepper.fifo_priority, "executor": self._executor_fifo,
+            "fifo_priority": {"stepping": self.stepper.fifo_priority, "executor": self._helper_fifo,
                               "publisher": self._publisher_fifo},
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "commands_waited": st.commands_waited,
