@@ -315,15 +315,16 @@ class Samples:
 class Series:
     """Every value of a per-step quantity, appended in amortized O(1) to a float64 buffer that
     doubles when full: 8 bytes per value for as long as the run lasts (a Python list of floats
-    takes 32, and a 1 kHz client keeps three of them)."""
+    takes 32, and a 1 kHz client keeps three of them). ``width``: each value is a row of that many
+    floats (``add`` takes a sequence)."""
 
-    def __init__(self, capacity: int = 1 << 12):
-        self._buf = np.empty(capacity)
+    def __init__(self, capacity: int = 1 << 12, width: int | None = None):
+        self._buf = np.empty(capacity if width is None else (capacity, width))
         self.count = 0
 
-    def add(self, x: float) -> None:
-        if self.count == self._buf.size:
-            self._buf = np.concatenate([self._buf, np.empty(self._buf.size)])
+    def add(self, x) -> None:
+        if self.count == self._buf.shape[0]:
+            self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
         self._buf[self.count] = x
         self.count += 1
 
@@ -332,7 +333,8 @@ class Series:
 
     @property
     def values(self) -> np.ndarray:
-        """The values so far, shape (count,) (a view: copy it to keep it past the next add)."""
+        """The values so far, shape (count,) or (count, width) (a view: copy it to keep it past
+        the next add)."""
         return self._buf[:self.count]
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import types
 
+import pytest
+
 from flexmb_io.realtime import Series
 from ros2_node.player import Player, TwinClock
 
@@ -39,3 +41,42 @@ def test_a_command_sent_out_of_stamp_order_waits_for_its_own_echo():
     p.sent.update({5_000_000: 1.0, 4_000_000: 1.001})                # a reset pulled the stamps back
     p._read_status(_status(4_000_000, 0.004), 1.002)
     assert list(p.sent) == [5_000_000] and p.latencies.count == 1
+
+
+def test_tracking_compares_the_kept_poses_with_the_law_as_each_pose_alone_would():
+    """Poses are kept as they come and compared with the commanded law at the end, in one call:
+    the same errors as the law evaluated pose by pose (what the callback did before)."""
+    import math
+
+    import numpy as np
+
+    from flexmb_core.model.compile import compile_scene
+    from flexmb_core.scene import load_scene
+    from ros2_node.player import CommandSource
+
+    program = compile_scene(load_scene("scenes/stewart_platform_bars.yaml")).program
+    p = Player.__new__(Player)
+    p.source = CommandSource(["a"], lambda t: None, program.reference_poses)
+    p.t0, p.until, p.poses = 0.0, 20.0, Series(width=8)
+    rng = np.random.default_rng(3)
+    expected_pos, expected_ang = [], []
+    for t in np.sort(rng.uniform(0.0, 20.0, 50)):
+        p_ref, q_ref = program.reference_pose(t)
+        x = p_ref + rng.normal(0.0, 1e-3, 3)
+        q = q_ref + rng.normal(0.0, 1e-4, 4)
+        q /= np.linalg.norm(q)
+        sec = int(t)
+        msg = types.SimpleNamespace(
+            header=types.SimpleNamespace(stamp=types.SimpleNamespace(sec=sec, nanosec=int(round((t - sec) * 1e9)))),
+            pose=types.SimpleNamespace(position=types.SimpleNamespace(x=x[0], y=x[1], z=x[2]),
+                                       orientation=types.SimpleNamespace(w=q[0], x=q[1], y=q[2], z=q[3])))
+        p._on_pose(msg)
+        t_msg = sec + int(round((t - sec) * 1e9)) * 1e-9
+        p_ref, q_ref = program.reference_pose(t_msg)
+        expected_pos.append(float(np.linalg.norm(x - p_ref)))
+        expected_ang.append(2.0 * math.acos(min(1.0, abs(float(np.dot(q, q_ref))))))
+    tr = p.tracking()
+    assert tr["samples"] == 50
+    assert tr["max_position_error_m"] == pytest.approx(max(expected_pos), rel=1e-12)
+    assert tr["rms_position_error_m"] == pytest.approx(math.sqrt(np.mean(np.square(expected_pos))), rel=1e-12)
+    assert tr["max_orientation_error_rad"] == pytest.approx(max(expected_ang), rel=1e-9)

@@ -57,3 +57,12 @@ def test_series_keeps_every_value_at_eight_bytes_each():
         s.add(float(v))
     assert len(s) == 1000
     np.testing.assert_array_equal(s.values, np.arange(1000.0))
+
+
+def test_series_of_rows_keeps_them_in_order_across_growth():
+    s = Series(capacity=2, width=3)
+    rows = np.arange(30.0).reshape(10, 3)
+    for r in rows:
+        s.add(tuple(r))
+    assert s.values.shape == (10, 3)
+    np.testing.assert_array_equal(s.values, rows)
