@@ -23,7 +23,9 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -144,6 +146,36 @@ class _Progress:
             sys.stderr.write("\n")
 
 
+class _StopOnSignal:
+    """SIGINT and SIGTERM during a run: the step under way ends, then the run stops as interrupted
+    (``check`` raises KeyboardInterrupt between steps), so the JSON, the summary and every hook's
+    recording describe a whole state — Python's default SIGINT would interrupt a step half way and
+    SIGTERM's would end the process with nothing written. Only the main thread installs handlers;
+    the former ones come back on exit."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._old: dict[int, object] = {}
+
+    def __enter__(self) -> "_StopOnSignal":
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._note)
+        return self
+
+    def _note(self, signum, frame) -> None:
+        self.signum = signum
+
+    def check(self) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt(f"signal {self.signum}")
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .simulator import Simulator
     from .tracking import PoseTracker
@@ -168,38 +200,44 @@ def cmd_run(args: argparse.Namespace) -> int:
     hooks = [h(args, scene, model) for h in getattr(args, "hook_factories", ())]
     hooks = [h for h in hooks if h is not None]
 
+    stop = _StopOnSignal()
+
     def on_step(s, res):
         tracker.update(s.state.t, s.state.q)
         progress(s, res)
         for h in hooks:
             h.step(s, res)
+        stop.check()
 
     error = ""
-    try:
-        if path is not None:
-            path.initialize()
+    with stop:        # until every hook has closed its recording: a second signal waits too
+        try:
+            if path is not None:
+                path.initialize()
+            for h in hooks:
+                h.start(sim)
+            if path is None:
+                sim.run(until, callback=on_step)
+            else:
+                path.run(callback=on_step)
+        except ConvergenceError as exc:
+            error = str(exc)
+        except KeyboardInterrupt:
+            # SIGINT/SIGTERM (_StopOnSignal): stop stepping but close every hook (recordings keep all
+            # they got) and report
+            error = f"interrupted at t = {sim.state.t:.6g} s"
+        finally:
+            progress.close()
+        summary = sim.summary()
+        summary.update({"scene": scene.name, "scene_file": str(args.scene), "analysis": spec.analysis})
+        summary.update(_run_keys(spec, sim, path, error))
+        error = summary["error"]
+        summary.update({"jit_warmup_s": warm, "completed": not error, "outputs": sim.outputs()})
+        tracking = tracker.summary()
+        if tracking:
+            summary["tracking"] = tracking
         for h in hooks:
-            h.start(sim)
-        if path is None:
-            sim.run(until, callback=on_step)
-        else:
-            path.run(callback=on_step)
-    except ConvergenceError as exc:
-        error = str(exc)
-    except KeyboardInterrupt:
-        # SIGINT: stop stepping but close every hook (recordings keep all they got) and report
-        error = f"interrupted at t = {sim.state.t:.6g} s"
-    finally:
-        progress.close()
-    summary = sim.summary()
-    summary.update({"scene": scene.name, "scene_file": str(args.scene), "analysis": spec.analysis})
-    summary.update(_run_keys(spec, sim, path, error))
-    error = summary["error"]
-    summary.update({"jit_warmup_s": warm, "completed": not error, "outputs": sim.outputs()})
-    if tracker.active:
-        summary["tracking"] = tracker.summary()
-    for h in hooks:
-        h.close(sim, summary)
+            h.close(sim, summary)
     text = json.dumps(summary, indent=2, allow_nan=True)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
@@ -257,8 +295,8 @@ def _print_run(scene, summary: dict, warm: float, tracker) -> None:
                   f"{b['negative_pivots'][1]}")
     for k, v in summary["outputs"].items():
         print(f"  {k}: {_brief(v)}")
-    if tracker.active:
-        tr = summary["tracking"]
+    tr = summary.get("tracking")
+    if tr:
         print(f"  tracking of '{tr['output']}' vs the commanded pose: max position error "
               f"{tr['max_position_error_m']:.3e} m (t = {tr['t_of_max_position_error_s']:.3f} s), "
               f"rms {tr['rms_position_error_m']:.3e} m, max orientation error {tr['max_orientation_error_rad']:.3e} rad")
@@ -406,9 +444,18 @@ Exit codes: 0 every run completed, 3 some runs failed (their rows say why), 1 ba
 """
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the CLI's exit code for bad input (1, README "Exit codes"); argparse's own is
+    2, which ``flexmb run`` uses for a step that did not converge. Subcommand parsers are of the
+    same class."""
+
+    def error(self, message: str):
+        self.print_usage(sys.stderr)
+        self.exit(1, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flexmb", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = _Parser(prog="flexmb", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="verb", required=True)
 
     c = sub.add_parser("check", help="validate a scene and print the model summary")

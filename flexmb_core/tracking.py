@@ -7,42 +7,71 @@ import math
 import numpy as np
 
 from .model.model import Model
-from .observers import platform_pose
+from .observers import PlatformObserver
 
 
 class PoseTracker:
     """Accumulates position / orientation errors of the scene's ``platform_pose`` output.
 
     Active only when the scene has such an output and its command program knows the commanded
-    pose (``reference_pose(t)``); otherwise :attr:`active` is False and nothing is computed.
+    pose (``reference_poses(t)``); otherwise :attr:`active` is False and nothing is computed.
+
+    Every step's pose is kept (:class:`~flexmb_core.observers.PlatformObserver`, a few µs) and
+    compared with the commanded law :data:`CHUNK` poses at a time, in one vectorized call: the
+    law costs ~0.1 ms per call whatever the number of times, which per step was 20× the bar-leg
+    twin's own step.
     """
+
+    CHUNK = 1024
 
     def __init__(self, model: Model):
         self.model = model
         outs = [o for o in model.scene.outputs if o.kind == "platform_pose"]
         self.output = outs[0] if outs else None
-        self.active = self.output is not None and hasattr(model.program, "reference_pose")
+        self.active = self.output is not None and hasattr(model.program, "reference_poses")
         self.max_position = 0.0
         self.max_angle = 0.0
         self.t_max_position = 0.0
         self._sq_position = 0.0
         self.samples = 0
+        if self.active:
+            self._observe = PlatformObserver(model, tuple(self.output.nodes))
+            self._t = np.empty(self.CHUNK)              # s
+            self._pos = np.empty((self.CHUNK, 3))       # m
+            self._quat = np.empty((self.CHUNK, 4))      # (w, x, y, z)
+            self._n = 0
 
     def update(self, t: float, q: np.ndarray) -> None:
         if not self.active:
             return
-        pos, quat = platform_pose(self.model, q, self.output.nodes)
-        p_ref, q_ref = self.model.program.reference_pose(t)
-        dp = float(np.linalg.norm(pos - p_ref))
-        ang = 2.0 * math.acos(min(1.0, abs(float(quat @ q_ref))))
-        if dp > self.max_position:
-            self.max_position, self.t_max_position = dp, t
-        self.max_angle = max(self.max_angle, ang)
-        self._sq_position += dp * dp
-        self.samples += 1
+        n = self._n
+        self._t[n] = t
+        self._observe(q, self._pos[n], self._quat[n])
+        self._n = n + 1
+        if self._n == self.CHUNK:
+            self._compare()
+
+    def _compare(self) -> None:
+        """The kept poses against the law, folded into the running maxima and sum of squares."""
+        n, self._n = self._n, 0
+        if not n:
+            return
+        t = self._t[:n]
+        p_ref, q_ref = self.model.program.reference_poses(t)
+        dp = np.linalg.norm(self._pos[:n] - p_ref, axis=1)
+        ang = 2.0 * np.arccos(np.minimum(1.0, np.abs(np.einsum("ij,ij->i", self._quat[:n], q_ref))))
+        k = int(np.argmax(dp))
+        if dp[k] > self.max_position:
+            self.max_position, self.t_max_position = float(dp[k]), float(t[k])
+        self.max_angle = max(self.max_angle, float(ang.max()))
+        self._sq_position += float(dp @ dp)
+        self.samples += n
 
     def summary(self) -> dict:
-        if not self.active or not self.samples:
+        if not self.active:
+            return {}
+        self._compare()
+        if not self.samples:
             return {}
         return {"output": self.output.name, "max_position_error_m": self.max_position,
                 "t_of_max_position_error_s": self.t_max_position,

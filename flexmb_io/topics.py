@@ -1,4 +1,4 @@
-"""The twin's ROS interface: topic names and message types (a contract; see README "ROS interface").
+"""The twin's ROS interface: topic names and message types (a contract; see README "The ROS 2 twin node").
 
 Names follow ROS 2's rules, so a namespace (``--ros-args -r __ns:=/robot1``) and remappings
 (``-r joint_states:=js``) apply to them: names starting with ``~/`` are private to the node and

@@ -12,16 +12,14 @@ interchangeable) and is made for exact replay:
   ``~/shape`` at most at ``shape_rate`` (20 Hz).
 
 Samples come from :class:`~flexmb_core.report.TwinReporter`, messages from
-:mod:`flexmb_io.messages` — the node's code. SIGINT and SIGTERM are deferred to the end of the
-step being recorded, so the bag is closed complete (``flexmb run`` then exits 130).
+:mod:`flexmb_io.messages` — the node's code. ``flexmb run`` defers SIGINT and SIGTERM to the end of
+the step under way and then closes every hook, so the bag is closed complete (exit 130).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import signal
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -139,12 +137,9 @@ class McapRunHook:
         self._wall_prev = 0.0           # solver wall time after the previous step (s)
         self._step_wall = 0.0
         self._rtf_ref = (0.0, 0.0)      # (t, solver wall) at the last output
-        self._signal: int | None = None
-        self._old_handlers: dict[int, object] = {}
 
     # -- hook protocol -------------------------------------------------------------------------
     def start(self, sim) -> None:
-        self._install_signals()
         self._t_prev = float(sim.state.t)
         self._wall_prev = sim.stats.wall_time_s
         self._rtf_ref = (self._t_prev, self._wall_prev)
@@ -164,8 +159,6 @@ class McapRunHook:
         self._t_prev = t
         if self._outputs.due(t):
             self._write_outputs(sim, shape=self._shapes.due(t))
-        if self._signal is not None:
-            raise KeyboardInterrupt(f"signal {self._signal}")
 
     def close(self, sim, summary: dict) -> None:
         try:
@@ -173,7 +166,6 @@ class McapRunHook:
                 self._write_outputs(sim, shape=True)        # always the final state
         finally:
             self.recorder.close()
-            self._restore_signals()
         summary["mcap"] = str(self.recorder.path)
         summary["mcap_messages"] = self.recorder.message_count
 
@@ -206,22 +198,6 @@ class McapRunHook:
         self._rtf_ref = (t, wall)
         return M.StatusTiming(step_wall_time=self._step_wall, steps=sim.stats.steps,
                               unconverged_steps=sim.stats.unconverged_steps, real_time_factor=rtf)
-
-    # -- signals: finish the step, then stop (the core closes every hook) ----------------------------
-    def _install_signals(self) -> None:
-        if threading.current_thread() is not threading.main_thread():
-            return
-
-        def handler(signum, frame):
-            self._signal = signum
-
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old_handlers[sig] = signal.signal(sig, handler)
-
-    def _restore_signals(self) -> None:
-        for sig, old in self._old_handlers.items():
-            signal.signal(sig, old)
-        self._old_handlers.clear()
 
 
 def make_hook(args, scene, model) -> McapRunHook | None:

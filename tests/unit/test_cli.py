@@ -73,3 +73,57 @@ def test_commands_stewart_writes_a_table(tmp_path):
     lines = out.read_text().splitlines()
     assert lines[0].startswith("t,leg1,leg2,leg3,leg4,leg5,leg6")
     assert len(lines) == 102
+
+
+def test_a_flag_argparse_rejects_exits_1_with_the_usage():
+    """Bad input exits 1 whoever finds it (README "Exit codes"): argparse's own 2 would read as a step
+    that did not converge."""
+    p = run("run", "scenes/cantilever_b1.yaml", "--integrator", "foo")
+    assert p.returncode == 1
+    assert "usage: flexmb run" in p.stderr and "invalid choice: 'foo'" in p.stderr
+    p = run("run", "scenes/cantilever_b1.yaml", "--no-such-flag")
+    assert p.returncode == 1 and "unrecognized arguments: --no-such-flag" in p.stderr
+
+
+def test_sigterm_ends_a_run_after_its_step_with_130_and_the_json(tmp_path):
+    """SIGTERM (and SIGINT) stop ``flexmb run`` after the step under way, without a recording hook
+    too: exit 130, the JSON written with the state reached (a whole step: its time a multiple of Δt).
+    stderr is a terminal so that the progress bar says when the run steps."""
+    import os
+    import pty
+    import select
+    import signal
+    import time
+
+    out = tmp_path / "o.json"
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(FLEXMB + ["run", "scenes/stewart_platform_bars.yaml", "--until", "100000", "--json", str(out)],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=slave)
+    os.close(slave)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 120
+        while b" t = " not in seen:             # the progress bar: the run is stepping
+            assert proc.poll() is None and time.monotonic() < deadline, seen.decode(errors="replace")[-2000:]
+            if select.select([master], [], [], 0.5)[0]:
+                seen += os.read(master, 4096)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+        while select.select([master], [], [], 0.2)[0]:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:                     # the terminal closed with the process
+                break
+            if not chunk:
+                break
+            seen += chunk
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(master)
+    err = seen.decode(errors="replace")
+    assert proc.returncode == 130, err[-2000:]
+    assert "flexmb run: interrupted at t =" in err
+    s = json.loads(out.read_text())
+    assert s["completed"] is False and s["error"].startswith("interrupted at t =")
+    assert 0 < s["sim_time_s"] < 100000 and s["steps"] == round(s["sim_time_s"] / s["dt"])
