@@ -36,6 +36,7 @@ import collections
 import ctypes
 import math
 import os
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -153,6 +154,61 @@ def apply_thread_scheduling(cpus: tuple[int, ...], rt_priority: int) -> tuple[li
                     "rtprio limit, ulimit -r); the stepping thread keeps the normal scheduler")
             (notes if rt_priority < 0 else warnings).append(text)
     return warnings, notes
+
+
+# The kernel's PM QoS interface for the CPUs' idle states: while a process holds this file open with a
+# latency (µs, int32) written to it, cpuidle keeps every CPU out of idle states that take longer to
+# leave (0: the CPUs poll when idle, never halt) — the setting cyclictest and real-time stacks use.
+CPU_DMA_LATENCY = "/dev/cpu_dma_latency"
+
+
+class IdleLatencyRequest:
+    """A PM QoS request on the CPUs' idle-state exit latency (``cpu_dma_latency``), held until
+    :meth:`release`.
+
+    A CPU that wakes from a deep idle state (on a virtual machine: a halted vCPU the hypervisor
+    descheduled) starts the work late and with cold caches. Measured on this 2-core KVM guest
+    (cpuidle haltpoll, 2026-11-29): a 1 kHz SCHED_FIFO wake-up p50 / p99 17 / 50 µs against
+    32–40 / 83–99 µs, the node's command→state latency p50 −0.1 ms — but the hypervisor then
+    preempts the always-busy vCPUs in slices of milliseconds (wake-ups > 1 ms late 4–27 against 0–6
+    in 40 s), which costs missed deadlines (README "Deadlines and the host").
+
+    Parameters
+    ----------
+    us : int
+        Most exit latency allowed (µs, ≥ 0).
+    path : str
+        The PM QoS device (a test points it elsewhere).
+    """
+
+    def __init__(self, us: int, path: str = CPU_DMA_LATENCY):
+        self.us, self.path = int(us), path
+        self._fd: int | None = None
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def acquire(self) -> str:
+        """Open the device and write the request; '' when in force, else why not (the device is
+        missing or not writable: not Linux, no root or udev rule)."""
+        try:
+            fd = os.open(self.path, os.O_WRONLY)
+        except OSError as exc:
+            return f"{self.path}: {exc.strerror or exc}"
+        try:
+            os.write(fd, self.us.to_bytes(4, sys.byteorder, signed=True))
+        except OSError as exc:
+            os.close(fd)
+            return f"{self.path}: {exc.strerror or exc}"
+        self._fd = fd
+        return ""
+
+    def release(self) -> None:
+        """Close the device: the kernel drops the request."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
 
 # SCHED_FIFO priority of the node's other threads that take the GIL (the executor, which applies

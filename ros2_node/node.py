@@ -48,8 +48,8 @@ from flexmb_core.report import TwinReporter
 from flexmb_core.scene import load_scene
 from flexmb_io import messages as M
 from flexmb_io import topics as T
-from flexmb_io.realtime import (Samples, Snapshot, Stepper, StepperConfig, fifo_priority_in_force,
-                                helper_priority, raise_to_fifo, restore_scheduling)
+from flexmb_io.realtime import (IdleLatencyRequest, Samples, Snapshot, Stepper, StepperConfig,
+                                fifo_priority_in_force, helper_priority, raise_to_fifo, restore_scheduling)
 from flexmb_io.shells import ShellShapes
 from flexmb_io.twin import RunnerOptions, TwinRunner
 from flexmb_io.wire import serialize
@@ -162,6 +162,8 @@ class TwinNode:
         self._publisher_fifo = 0            # the publisher's, as it found it in force
         self._executor_sched = None         # the executor thread's scheduling before, restored at the end
         self._executor_thread = None        # the thread that raised it (only it can put it back)
+        self._idle_latency: IdleLatencyRequest | None = None   # cpu_dma_latency, while in force
+        self._cpu_dma_latency_in_force: int | None = None     # µs it held, for the summary (None: no request)
         self._publisher = None
         self._summary: dict | None = None
         self._configure_error: BaseException | None = None
@@ -394,6 +396,7 @@ class TwinNode:
         self._rss_start = self._rss_now = self._rss_max = _rss_mb()
         self.stepper.start()
         self._raise_helpers()
+        self._request_idle_latency()
         self._publisher.start()
         self._threads_started = True
         for w in self.stepper.warnings:
@@ -419,10 +422,29 @@ class TwinNode:
         self._helper_fifo = prio
         self.stepper.notes.append(f"executor and publisher threads on SCHED_FIFO priority {prio}")
 
+    def _request_idle_latency(self) -> None:
+        """``cpu_dma_latency`` ≥ 0 (realtime): hold the PM QoS request while the threads run (see
+        :class:`flexmb_io.realtime.IdleLatencyRequest`); a refusal is a warning."""
+        if self.p.mode != "realtime" or self.p.cpu_dma_latency < 0 or self._idle_latency is not None:
+            return
+        request = IdleLatencyRequest(self.p.cpu_dma_latency)
+        refused = request.acquire()
+        if refused:
+            self.stepper.warnings.append(f"cpu_dma_latency {self.p.cpu_dma_latency} µs not applied ({refused}); the "
+                                         "CPUs keep their idle states")
+            return
+        self._idle_latency = request
+        self._cpu_dma_latency_in_force = request.us
+        self.stepper.notes.append(f"PM QoS: CPU idle-state exit latency ≤ {self.p.cpu_dma_latency} µs while the "
+                                  "twin runs")
+
     def _stop_threads(self) -> None:
         if not self._threads_started:
             return
         self.stepper.stop()
+        if self._idle_latency is not None:
+            self._idle_latency.release()
+            self._idle_latency = None
         self.wall_stop = time.perf_counter()
         self._publisher.join(10.0)
         self._drain_outbox()            # anything the publisher had not reached (it stopped)
@@ -927,6 +949,7 @@ class TwinNode:
             "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
             "fifo_priority": {"stepping": self.stepper.fifo_priority, "executor": self._helper_fifo,
                               "publisher": self._publisher_fifo},
+            "cpu_dma_latency_us": self._cpu_dma_latency_in_force,
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "commands_waited": st.commands_waited,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),

@@ -21,7 +21,7 @@ from flexmb_io import topics as T
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
                "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
-               "step-margin", "cpu-affinity", "rt-priority", "rt-threads", "diagnostics-rate", "clock-rate",
+               "step-margin", "cpu-affinity", "rt-priority", "rt-threads", "cpu-dma-latency", "diagnostics-rate", "clock-rate",
                "world-frame", "frame-prefix")
 # exit code of a node stopped by SIGINT/SIGTERM (after closing its recording and writing its summary)
 INTERRUPTED = 130
@@ -108,6 +108,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node_cmd += ["--rt-threads", args.rt_threads]
     if args.cpu_affinity:
         node_cmd += ["--cpu-affinity", args.cpu_affinity]
+    if args.cpu_dma_latency is not None:
+        node_cmd += ["--cpu-dma-latency", str(args.cpu_dma_latency)]
     if args.step_margin is not None:
         node_cmd += ["--step-margin", str(args.step_margin)]
     if args.fixed_step_margin:
@@ -226,6 +228,8 @@ def register(verbs, run_parser) -> None:
                    "(0: normal scheduling; default -1: 20 where the OS allows it)")
     n.add_argument("--rt-threads", choices=("stepping", "node"), help="realtime: stepping (default): the stepping "
                    "thread alone on SCHED_FIFO; node: the executor and publisher threads too, one priority below it")
+    n.add_argument("--cpu-dma-latency", type=int, metavar="US", help="realtime: hold a PM QoS request on the CPUs' "
+                   "idle states while running (µs of exit latency; 0: poll when idle; default -1: none)")
     n.add_argument("--diagnostics-rate", type=float, help="Hz of /diagnostics (default 1; 0 disables)")
     n.add_argument("--clock-rate", type=float, help="Hz (simulated time) of /clock (default 100)")
     n.add_argument("--world-frame", help="frame_id of headers, parent of the /tf transforms (default world)")
@@ -275,6 +279,8 @@ def register(verbs, run_parser) -> None:
     d.add_argument("--rt-threads", choices=("stepping", "node"), help="the node's rt_threads: stepping (default: "
                    "only the stepping thread on SCHED_FIFO) or node (the executor and publisher threads too)")
     d.add_argument("--cpu-affinity", help="CPU ids of the node's stepping thread, e.g. 1")
+    d.add_argument("--cpu-dma-latency", type=int, metavar="US", help="the node's cpu_dma_latency: a PM QoS request "
+                   "on the CPUs' idle states (µs; 0: poll when idle; default -1: none)")
     d.add_argument("--step-margin", type=float, help="s before its deadline at which the node's idle step "
                    "starts (the node's step_margin; more than Δt keeps the twin ahead of the wall clock)")
     d.add_argument("--fixed-step-margin", action="store_true", help="keep the node's step_margin as given "

@@ -97,6 +97,11 @@ SPECS: tuple[ParamSpec, ...] = (
               "publisher), one priority below it, so that no other process preempts a thread the stepping thread "
               "waits for (fewer missed deadlines on a busy machine, a longer latency tail on an idle one)",
               choices=("stepping", "node")),
+    ParamSpec("cpu_dma_latency", -1, "realtime: a PM QoS request on the CPUs' idle states while the node runs "
+              "(µs of exit latency allowed, written to /dev/cpu_dma_latency; 0 = the CPUs poll when idle instead of "
+              "halting); -1 (default) = none. Shortens wake-ups on a machine to itself; on a shared virtual machine "
+              "the hypervisor then preempts the busy CPUs for milliseconds (more missed deadlines, README). Refused "
+              "(no permission): a warning", low=-1, high=1_000_000),
     ParamSpec("diagnostics_rate", 1.0, "rate (Hz of wall time) of /diagnostics; 0 disables", low=0.0, high=100.0),
     ParamSpec("record", "", "record inputs and outputs to this rosbag2/MCAP directory ('' = none)"),
     ParamSpec("rrd", "", "log the twin to this rerun .rrd file ('' = none)"),
@@ -141,6 +146,7 @@ class NodeParams:
     cpu_affinity: str = ""
     rt_priority: int = -1
     rt_threads: str = "stepping"
+    cpu_dma_latency: int = -1
     diagnostics_rate: float = 1.0
     record: str = ""
     rrd: str = ""

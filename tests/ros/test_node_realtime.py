@@ -4,6 +4,7 @@ and the node's summary accounts for its deadlines and CPU."""
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
@@ -59,10 +60,12 @@ def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env, rt_threads):
     step wall times and the node's CPU beyond its solver, and /diagnostics says OK for the solver.
     Its threads' scheduling as each found it in force: with ``rt_threads: node`` the executor and the
     publisher one SCHED_FIFO priority below the stepping thread, with ``stepping`` on the normal
-    scheduler (all of them there where the OS allows no SCHED_FIFO)."""
+    scheduler (all of them there where the OS allows no SCHED_FIFO). With ``rt_threads: node`` it also
+    holds a PM QoS request (``cpu_dma_latency`` 0) where the OS takes one, and says so."""
     summary = tmp_path / "s.json"
+    qos = ["--cpu-dma-latency", "0"] if rt_threads == "node" else []
     node = NodeProcess([SCENE, "--mode", "realtime", "--duration", "6", "--diagnostics-rate", "5",
-                        "--rt-threads", rt_threads, "--summary-json", str(summary), "--quiet"], dds_env,
+                        "--rt-threads", rt_threads, "--summary-json", str(summary), "--quiet", *qos], dds_env,
                        tmp_path / "node.log")
     client = TwinClient()
     try:
@@ -71,7 +74,8 @@ def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env, rt_threads):
     finally:
         client.close()
     node.proc.wait(timeout=60)
-    assert node.stop() == 0, node.log()
+    log = node.log()
+    assert node.stop() == 0, log
     s = json.loads(summary.read_text())
     assert s["steps"] == 6000 and s["failed_steps"] == 0
     assert s["step_wall_time_s"]["count"] == 6000 and s["deadline_slack_s"]["count"] == 6000
@@ -82,6 +86,12 @@ def test_a_twin_that_keeps_up_reports_its_timing(tmp_path, dds_env, rt_threads):
     fifo = s["fifo_priority"]
     helpers = fifo["stepping"] - 1 if fifo["stepping"] and rt_threads == "node" else 0
     assert fifo["executor"] == fifo["publisher"] == helpers, fifo
+    if not qos:
+        assert s["cpu_dma_latency_us"] is None
+    elif os.access("/dev/cpu_dma_latency", os.W_OK):
+        assert s["cpu_dma_latency_us"] == 0 and "PM QoS: CPU idle-state exit latency ≤ 0 µs" in log
+    else:
+        assert s["cpu_dma_latency_us"] is None and "cpu_dma_latency 0 µs not applied" in log
 
 
 @pytest.mark.timeout(180)
