@@ -150,8 +150,9 @@ class _StopOnSignal:
     """SIGINT and SIGTERM during a run: the step under way ends, then the run stops as interrupted
     (``check`` raises KeyboardInterrupt between steps), so the JSON, the summary and every hook's
     recording describe a whole state — Python's default SIGINT would interrupt a step half way and
-    SIGTERM's would end the process with nothing written. Only the main thread installs handlers;
-    the former ones come back on exit."""
+    SIGTERM's would end the process with nothing written. A second signal interrupts at once (a step
+    that takes minutes must not hold Ctrl-C off). Only the main thread installs handlers; the former
+    ones come back on exit."""
 
     def __init__(self):
         self.signum: int | None = None
@@ -164,6 +165,8 @@ class _StopOnSignal:
         return self
 
     def _note(self, signum, frame) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt(f"signal {signum} again")
         self.signum = signum
 
     def check(self) -> None:
@@ -210,7 +213,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         stop.check()
 
     error = ""
-    with stop:        # until every hook has closed its recording: a second signal waits too
+    with stop:        # until every hook has closed its recording
         try:
             if path is not None:
                 path.initialize()
@@ -559,6 +562,11 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
     except FlexmbError as exc:
         print(_bounded(f"flexmb {args.verb}: {exc}"), file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        # a verb that does not stop on its own after a signal (or a second signal, _StopOnSignal):
+        # the exit code of an interrupted run, no traceback
+        print(f"flexmb {args.verb}: interrupted", file=sys.stderr)
+        return 130
 
 
 def _bounded(message: str) -> str:

@@ -10,6 +10,29 @@ from .model.model import Model
 from .observers import PlatformObserver
 
 
+def pose_errors(pos: np.ndarray, quat: np.ndarray, pos_ref: np.ndarray, quat_ref: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (m) and rotation angles (rad) between poses and their references.
+
+    Parameters
+    ----------
+    pos, pos_ref : ndarray, shape (n, 3)
+        Centroids (m).
+    quat, quat_ref : ndarray, shape (n, 4)
+        Unit quaternions (w, x, y, z); q and −q are the same rotation.
+
+    Returns
+    -------
+    distance : ndarray, shape (n,)
+        |pos − pos_ref| (m).
+    angle : ndarray, shape (n,)
+        Angle of the rotation between each pair, 2 acos |⟨q, q_ref⟩| (rad).
+    """
+    distance = np.linalg.norm(pos - pos_ref, axis=1)
+    angle = 2.0 * np.arccos(np.minimum(1.0, np.abs(np.einsum("ij,ij->i", quat, quat_ref))))
+    return distance, angle
+
+
 class PoseTracker:
     """Accumulates position / orientation errors of the scene's ``platform_pose`` output.
 
@@ -57,9 +80,7 @@ class PoseTracker:
         if not n:
             return
         t = self._t[:n]
-        p_ref, q_ref = self.model.program.reference_poses(t)
-        dp = np.linalg.norm(self._pos[:n] - p_ref, axis=1)
-        ang = 2.0 * np.arccos(np.minimum(1.0, np.abs(np.einsum("ij,ij->i", self._quat[:n], q_ref))))
+        dp, ang = pose_errors(self._pos[:n], self._quat[:n], *self.model.program.reference_poses(t))
         k = int(np.argmax(dp))
         if dp[k] > self.max_position:
             self.max_position, self.t_max_position = float(dp[k]), float(t[k])

@@ -21,8 +21,8 @@ from flexmb_io import topics as T
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
                "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
-               "step-margin", "cpu-affinity", "rt-priority", "rt-threads", "cpu-dma-latency", "diagnostics-rate", "clock-rate",
-               "world-frame", "frame-prefix")
+               "step-margin", "cpu-affinity", "rt-priority", "rt-threads", "cpu-dma-latency", "diagnostics-rate",
+               "clock-rate", "world-frame", "frame-prefix")
 # exit code of a node stopped by SIGINT/SIGTERM (after closing its recording and writing its summary)
 INTERRUPTED = 130
 

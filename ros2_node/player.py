@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from flexmb_core.errors import FlexmbError
+from flexmb_core.tracking import pose_errors
 from flexmb_io import messages as M
 from flexmb_io import topics as T
 from flexmb_io.realtime import Series
@@ -295,11 +296,9 @@ class Player:
         rows = self.poses.values
         if self.source.reference_poses is None or not len(rows):
             return None
-        p_ref, q_ref = self.source.reference_poses(rows[:, 0])
-        pos = np.linalg.norm(rows[:, 1:4] - p_ref, axis=1)
-        dot = np.minimum(1.0, np.abs(np.einsum("ij,ij->i", rows[:, 4:8], q_ref)))
-        ang = 2.0 * np.arccos(dot)
-        return {"max_position_error_m": float(pos.max()), "rms_position_error_m": float(np.sqrt(np.mean(np.square(pos)))),
+        pos, ang = pose_errors(rows[:, 1:4], rows[:, 4:8], *self.source.reference_poses(rows[:, 0]))
+        return {"max_position_error_m": float(pos.max()),
+                "rms_position_error_m": float(np.sqrt(np.mean(np.square(pos)))),
                 "max_orientation_error_rad": float(ang.max()), "samples": int(pos.size)}
 
     # -- sending ---------------------------------------------------------------------------------

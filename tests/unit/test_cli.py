@@ -97,8 +97,8 @@ def test_sigterm_ends_a_run_after_its_step_with_130_and_the_json(tmp_path):
 
     out = tmp_path / "o.json"
     master, slave = pty.openpty()
-    proc = subprocess.Popen(FLEXMB + ["run", "scenes/stewart_platform_bars.yaml", "--until", "100000", "--json", str(out)],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=slave)
+    argv = ["run", "scenes/stewart_platform_bars.yaml", "--until", "100000", "--json", str(out)]
+    proc = subprocess.Popen(FLEXMB + argv, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=slave)
     os.close(slave)
     seen = b""
     try:
@@ -127,3 +127,18 @@ def test_sigterm_ends_a_run_after_its_step_with_130_and_the_json(tmp_path):
     s = json.loads(out.read_text())
     assert s["completed"] is False and s["error"].startswith("interrupted at t =")
     assert 0 < s["sim_time_s"] < 100000 and s["steps"] == round(s["sim_time_s"] / s["dt"])
+
+
+def test_a_second_signal_interrupts_at_once():
+    """The first signal waits for the step under way; a second one (a step that takes minutes)
+    interrupts where it lands."""
+    import pytest
+
+    from flexmb_core.cli import _StopOnSignal
+
+    stop = _StopOnSignal()
+    stop._note(15, None)
+    with pytest.raises(KeyboardInterrupt, match="signal 15"):
+        stop.check()
+    with pytest.raises(KeyboardInterrupt, match="again"):
+        stop._note(2, None)
