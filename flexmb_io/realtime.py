@@ -168,10 +168,10 @@ class IdleLatencyRequest:
 
     A CPU that wakes from a deep idle state (on a virtual machine: a halted vCPU the hypervisor
     descheduled) starts the work late and with cold caches. Measured on this 2-core KVM guest
-    (cpuidle haltpoll, 2026-11-29): a 1 kHz SCHED_FIFO wake-up p50 / p99 17 / 50 µs against
-    32–40 / 83–99 µs, the node's command→state latency p50 −0.1 ms — but the hypervisor then
+    (cpuidle haltpoll, 2026-11-29): a 1 kHz SCHED_FIFO wake-up p50 / p99 17 / 47–52 µs against
+    31–41 / 83–99 µs, the node's command→state latency p50 −0.08 ms — but the hypervisor then
     preempts the always-busy vCPUs in slices of milliseconds (wake-ups > 1 ms late 4–27 against 0–6
-    in 40 s), which costs missed deadlines (README "Deadlines and the host").
+    in 40 s), which costs missed deadlines (README "Idle CPUs").
 
     Parameters
     ----------
