@@ -162,8 +162,7 @@ class TwinNode:
         self._publisher_fifo = 0            # the publisher's, as it found it in force
         self._executor_sched = None         # the executor thread's scheduling before, restored at the end
         self._executor_thread = None        # the thread that raised it (only it can put it back)
-        self._idle_latency: IdleLatencyRequest | None = None   # cpu_dma_latency, while in force
-        self._cpu_dma_latency_in_force: int | None = None     # µs it held, for the summary (None: no request)
+        self._idle_latency: IdleLatencyRequest | None = None   # cpu_dma_latency once in force (kept for the summary)
         self._publisher = None
         self._summary: dict | None = None
         self._configure_error: BaseException | None = None
@@ -425,7 +424,7 @@ class TwinNode:
     def _request_idle_latency(self) -> None:
         """``cpu_dma_latency`` ≥ 0 (realtime): hold the PM QoS request while the threads run (see
         :class:`flexmb_io.realtime.IdleLatencyRequest`); a refusal is a warning."""
-        if self.p.mode != "realtime" or self.p.cpu_dma_latency < 0 or self._idle_latency is not None:
+        if self.p.mode != "realtime" or self.p.cpu_dma_latency < 0 or (self._idle_latency and self._idle_latency.held):
             return
         request = IdleLatencyRequest(self.p.cpu_dma_latency)
         refused = request.acquire()
@@ -434,7 +433,6 @@ class TwinNode:
                                          "CPUs keep their idle states")
             return
         self._idle_latency = request
-        self._cpu_dma_latency_in_force = request.us
         self.stepper.notes.append(f"PM QoS: CPU idle-state exit latency ≤ {self.p.cpu_dma_latency} µs while the "
                                   "twin runs")
 
@@ -444,7 +442,6 @@ class TwinNode:
         self.stepper.stop()
         if self._idle_latency is not None:
             self._idle_latency.release()
-            self._idle_latency = None
         self.wall_stop = time.perf_counter()
         self._publisher.join(10.0)
         self._drain_outbox()            # anything the publisher had not reached (it stopped)
@@ -949,7 +946,7 @@ class TwinNode:
             "step_margin_s": self.stepper.margin, "step_margin_auto": self.p.step_margin_auto,
             "fifo_priority": {"stepping": self.stepper.fifo_priority, "executor": self._helper_fifo,
                               "publisher": self._publisher_fifo},
-            "cpu_dma_latency_us": self._cpu_dma_latency_in_force,
+            "cpu_dma_latency_us": self._idle_latency.us if self._idle_latency is not None else None,
             "dropped_publications": st.dropped_publications, "coalesced_publications": self._coalesced,
             "commands_waited": st.commands_waited,
             "step_wall_time_s": self.stepper.step_walls.percentiles(),
