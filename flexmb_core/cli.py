@@ -320,10 +320,17 @@ def cmd_commands(args: argparse.Namespace) -> int:
 
     n = int(round(args.until / args.dt)) + 1
     t = np.linspace(0.0, args.until, n)
-    lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time,
-                                                  switch_blend=args.switch_blend,
-                                                  blend_continuity=args.blend_continuity)
-    stewart.write_command_table(args.out, t, lengths, rates)
+    try:
+        lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time,
+                                                      switch_blend=args.switch_blend,
+                                                      blend_continuity=args.blend_continuity)
+    except ValueError as exc:          # the law's own checks of --until, --blend-time, --switch-blend
+        text = str(exc).replace("blend_time", "--blend-time").replace("switch_blend", "--switch-blend")
+        raise FlexmbError(text.replace("got times in", "--until asks for times in")) from None
+    try:
+        stewart.write_command_table(args.out, t, lengths, rates)
+    except OSError as exc:
+        raise FlexmbError(f"--out {args.out}: cannot write the table ({exc.strerror or exc})") from None
     print(f"wrote {n} rows × 6 legs ({args.start} start) to {args.out}")
     return 0
 

@@ -77,10 +77,11 @@ BEHIND_PAUSE = 1.0e-4
 # the step's own p99.9 wall time over the last ``window`` steps plus this headroom (s: the host's
 # p99 wake-up lateness, 0.17 ms measured, docs/benchmarks/node.md), never less than the configured
 # margin and at most AUTO_MARGIN_STEPS Δt; re-evaluated every AUTO_MARGIN_EVERY steps. Measured
-# (1 kHz node and player, 3 interleaved 20 s rounds, medians): the 1-element frame-leg twin, whose
-# tangent refreshes take 0.4–0.9 ms, missed 754 of ~21 300 deadlines with the fixed 0.4 ms and
-# 140 with this (0.61–0.65 ms in force); the bar-leg twin 683 and 44 (0.41–0.45 ms); the same
-# command→state latency (README "Deadlines and the host").
+# (1 kHz node and player, 3 interleaved 20 s rounds, medians, docs/benchmarks/node_ab_frame1.md and
+# node_ab_bars.md): the 1-element frame-leg twin, whose tangent refreshes take 0.4–0.9 ms, missed
+# 2 430 of ~21 300 deadlines with the fixed 0.4 ms and 206 with this (0.60–0.94 ms in force); the
+# bar-leg twin 297 and 180 (0.40–0.58 ms); the same command→state latency (README "Deadlines and
+# the host"). An earlier pair of runs gave 754 / 140 and 683 / 44.
 AUTO_MARGIN_HEADROOM = 2.0e-4
 AUTO_MARGIN_STEPS = 4
 AUTO_MARGIN_EVERY = 250

@@ -67,8 +67,11 @@ def cmd_play(args: argparse.Namespace) -> int:
             print("flexmb play: --csv needs --names leg1,leg2,... (actuator order of the columns)", file=sys.stderr)
             return 1
         source = CommandSource.from_csv(args.csv, args.names.split(","))
-    else:
+    elif args.scene:
         source = CommandSource.from_scene(args.scene)
+    else:
+        print("flexmb play: give a SCENE (its commands) or --csv TABLE --names leg1,leg2,...", file=sys.stderr)
+        return 1
     summary = run_player(source, json_out=args.json, twin=args.twin, mode=args.mode, until=args.until, dt=args.dt,
                          rate=args.rate, topic=args.topic, timeout=args.timeout,
                          **({} if args.lead is None else {"lead": args.lead}))
@@ -83,6 +86,9 @@ def _fmt_ms(x) -> str:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """The twin and the player as two processes on DDS; prints one summary."""
+    from flexmb_core.scene import load_scene
+
+    load_scene(args.scene)      # a bad scene is the user's error (exit 1), said once, before two processes start
     _discovery(args)
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
@@ -144,7 +150,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if player.returncode != 0 or node.returncode not in (0, INTERRUPTED) or not node_json.exists() \
             or not player_json.exists():
         print(f"flexmb demo: node exit {node.returncode}, player exit {player.returncode}", file=sys.stderr)
-        return 2
+        # 1: one of them refused its input (it said why above); else the run itself failed
+        return 1 if 1 in (node.returncode, player.returncode) else 2
     n = json.loads(node_json.read_text())
     p = json.loads(player_json.read_text())
     summary = {"node": n, "player": p}

@@ -351,7 +351,7 @@ def _as_time(t: ArrayLike) -> FloatArray:
     if arr.size and (arr.min() < -_T_TOL or arr.max() > T_END + _T_TOL):
         raise ValueError(
             f"the appendix law is defined for 0 <= t <= {T_END} s (Eq. 54), got times in "
-            f"[{arr.min()!r}, {arr.max()!r}] s"
+            f"[{float(arr.min()):g}, {float(arr.max()):g}] s"
         )
     return np.clip(arr, 0.0, T_END)
 

@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 FLEXMB = [sys.executable, "-m", "flexmb_core.cli"]
 
@@ -73,6 +75,38 @@ def test_commands_stewart_writes_a_table(tmp_path):
     lines = out.read_text().splitlines()
     assert lines[0].startswith("t,leg1,leg2,leg3,leg4,leg5,leg6")
     assert len(lines) == 102
+
+
+@pytest.mark.parametrize("flags,text", [
+    (["--until", "30"], "flexmb commands: the appendix law is defined for 0 <= t <= 20.0 s (Eq. 54), --until asks "
+                        "for times in [0, 30] s"),
+    (["--blend-time", "-1"], "flexmb commands: --blend-time must be a positive duration in s, got -1.0"),
+    (["--switch-blend", "50"], "flexmb commands: --switch-blend must be a duration in [0, 20] s"),
+])
+def test_commands_outside_the_appendix_law_exit_1_naming_the_flag(tmp_path, flags, text):
+    p = run("commands", "stewart", "--out", str(tmp_path / "c.csv"), *flags)
+    assert p.returncode == 1 and text in p.stderr and "Traceback" not in p.stderr
+    assert not (tmp_path / "c.csv").exists()
+
+
+def test_commands_to_an_unwritable_path_exit_1_naming_it(tmp_path):
+    out = tmp_path / "no_such_dir" / "c.csv"
+    p = run("commands", "stewart", "--out", str(out), "--until", "1")
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    assert f"flexmb commands: --out {out}: cannot write the table (No such file or directory)" in p.stderr
+
+
+def test_play_and_demo_refuse_what_they_cannot_run_with_exit_1(tmp_path):
+    """Before any DDS: the player without commands to play, the demo of a scene that does not load."""
+    ros = [sys.executable, "-m", "flexmb.cli"]
+    p = subprocess.run(ros + ["play", "--timeout", "2"], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert p.returncode == 1, p.stderr
+    assert "flexmb play: give a SCENE (its commands) or --csv TABLE --names leg1,leg2,..." in p.stderr
+    missing = tmp_path / "missing.yaml"
+    p = subprocess.run(ros + ["demo", str(missing), "--out", str(tmp_path / "demo")], capture_output=True, text=True,
+                       cwd=ROOT, timeout=120)
+    assert p.returncode == 1, p.stderr
+    assert f"flexmb demo: scene error: {missing}: cannot read scene file" in p.stderr and "Traceback" not in p.stderr
 
 
 def test_a_flag_argparse_rejects_exits_1_with_the_usage():
