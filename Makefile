@@ -32,7 +32,7 @@ TF2_MSGS_SRC := $(call interface_src,ros/tf2_msgs)
 # Flexible frame legs (1 cubic element each) on the truss platform; the bar-leg twin:
 # make demo DEMO_SCENE=scenes/stewart_platform_bars.yaml
 DEMO_SCENE ?= scenes/stewart_platform_1el_truss.yaml
-DEMO_CMD ?= $(VENV)/bin/flexmb demo $(DEMO_SCENE) --mcap build/demo/bag --out build/demo \
+DEMO_CMD ?= rm -rf build/demo/bag && $(VENV)/bin/flexmb demo $(DEMO_SCENE) --mcap build/demo/bag --out build/demo \
 	&& $(VENV)/bin/flexmb view build/demo/bag --rrd build/demo/stewart.rrd
 PYTEST_ARGS ?=
 

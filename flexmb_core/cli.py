@@ -29,7 +29,7 @@ import threading
 import time
 from pathlib import Path
 
-from .errors import ConvergenceError, FlexmbError, SceneError
+from .errors import ConvergenceError, FlexmbError, SceneError, thousands, writable_dir, writable_file
 
 
 def _env_defaults() -> None:
@@ -44,6 +44,8 @@ def _env_defaults() -> None:
 _STRAY = (ValueError, TypeError, KeyError, IndexError, ArithmeticError, RecursionError, MemoryError,
           UnicodeError)
 MESSAGE_CHARS = 1500          # an error message printed by main is at most this long
+MAX_SWEEP_RUNS = 1_000_000   # --samples at most: each sample is a whole run (a table row, a file each)
+MAX_TABLE_ROWS = 10_000_000  # rows of `commands` at most (0.7 GB of CSV; 20 s at 2 µs)
 
 
 def _load(path: str, overrides: dict | None = None, limits=None):
@@ -184,6 +186,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .tracking import PoseTracker
 
     overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
+    if args.json:
+        writable_file(args.json, "--json")      # before the run: no work lost to a bad path
     scene, model = _load(args.scene, overrides, _limits(args))
     spec = scene.solver
     sim = Simulator(model)
@@ -243,7 +247,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             h.close(sim, summary)
     text = json.dumps(summary, indent=2, allow_nan=True)
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(text + "\n")
     if not args.quiet:
         _print_run(scene, summary, warm, tracker)
@@ -319,6 +322,9 @@ def cmd_commands(args: argparse.Namespace) -> int:
     from .mechanisms import stewart
 
     n = int(round(args.until / args.dt)) + 1
+    if n > MAX_TABLE_ROWS:
+        raise FlexmbError(f"--dt {args.dt:g}: {thousands(n)} rows over --until {args.until:g} s; at most "
+                          f"{thousands(MAX_TABLE_ROWS)} (--dt ≥ {args.until / (MAX_TABLE_ROWS - 1):.3g} s)")
     t = np.linspace(0.0, args.until, n)
     try:
         lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time,
@@ -344,9 +350,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
     path = Path(args.scene)
     _load(args.scene)                                   # validate first: errors name file:key
     data = parse_yaml(read_scene_text(path), str(path))
-    if not args.tol > 0:
+    if not (math.isfinite(args.tol) and args.tol > 0):
         print(f"flexmb tune: --tol must be a positive number, got {args.tol}", file=sys.stderr)
         return 1
+    out = writable_dir(args.out or "build/tune", "--out")    # before the trials: none lost to a bad path
     if args.workers is not None and args.workers < 1:
         print(f"flexmb tune: --workers must be a positive integer, got {args.workers}", file=sys.stderr)
         return 1
@@ -363,8 +370,6 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
     result = _tune_where(args, lambda ev: tune(data, args.tol, until, source=str(path), progress=progress,
                                                 outputs=held, evaluator=ev))
-    out = Path(args.out or "build/tune")
-    out.mkdir(parents=True, exist_ok=True)
     stem = path.stem
     tuned = out / f"{stem}_tuned.yaml"
     best = result.best
@@ -411,8 +416,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from .study.progress import ProgressBar
     from .study.sweep import sweep
 
+    from .study.sweep import DEFAULT_OUT
+
     params = [x for group in (args.param or []) for x in group]
     outputs = [x for x in (args.outputs or "").split(",") if x] or None
+    if args.samples is not None and not 1 <= args.samples <= MAX_SWEEP_RUNS:
+        raise FlexmbError(f"--samples: expected 1 to {MAX_SWEEP_RUNS} runs, got {args.samples}")
+    if args.seed < 0:
+        raise FlexmbError(f"--seed: expected a non-negative integer, got {args.seed}")
+    writable_dir(args.out or DEFAULT_OUT, "--out")
     res = sweep(args.scene, params, samples=args.samples, distribution=args.distribution, seed=args.seed,
                 until=args.until, outputs=outputs, every=args.every, out=args.out, scheduler=args.scheduler,
                 workers=args.workers, retries=args.retries,

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 
 class FlexmbError(Exception):
     """Base class of every error flexmb raises on purpose."""
@@ -107,3 +110,45 @@ def name_list(names, limit: int = NAME_LIST_ITEMS) -> str:
     shown = ", ".join(excerpt(n, 40) for n in names[:limit])
     rest = len(names) - limit
     return f"[{shown}, … and {thousands(rest)} more]" if rest > 0 else f"[{shown}]"
+
+
+# -- output paths, checked before the work that writes them -------------------------------------
+
+def _path_text(path: Path) -> str:
+    text = str(path)
+    return text if len(text) <= EXCERPT_CHARS else text[:EXCERPT_CHARS - 1] + "…"
+
+
+def writable_file(path, flag: str) -> Path:
+    """``path`` (a file a command will write, e.g. ``--json``) once a file can be written there —
+    its directory created, an existing file left as it is — or :class:`FlexmbError` naming
+    ``flag``. Called before the run, so that no work is lost to a bad output path."""
+    p = Path(path)
+    if p.is_dir():
+        raise FlexmbError(f"{flag} {_path_text(p)}: is a directory (expected the path of a file to write)")
+    existed = p.exists()
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        with open(p, "a"):
+            pass
+    except OSError as exc:
+        raise FlexmbError(f"{flag} {_path_text(p)}: cannot write there ({exc.strerror or exc})") from None
+    if not existed:
+        p.unlink()
+    return p
+
+
+def writable_dir(path, flag: str) -> Path:
+    """``path`` (a directory a command will write into, e.g. ``--out``), created if missing, or
+    :class:`FlexmbError` naming ``flag``."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise FlexmbError(f"{flag} {_path_text(p)}: exists and is not a directory")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        probe = p / f".flexmb-write-probe-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        raise FlexmbError(f"{flag} {_path_text(p)}: cannot write there ({exc.strerror or exc})") from None
+    return p

@@ -41,7 +41,7 @@ import threading
 import time
 from pathlib import Path
 
-from flexmb_core.errors import FlexmbError
+from flexmb_core.errors import FlexmbError, excerpt, writable_file
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.model.workspace import Workspace
 from flexmb_core.report import TwinReporter
@@ -1105,9 +1105,21 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
     """Initialise rclpy, run one :class:`TwinNode` to its end, shut down; returns the summary."""
     import rclpy
     from rclpy.context import Context
+    from rclpy.exceptions import NameValidationException
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+    from rclpy.validate_node_name import validate_node_name
 
+    try:
+        validate_node_name(node_name)
+    except NameValidationException as exc:
+        raise FlexmbError(f"--name {excerpt(node_name)}: {str(exc).splitlines()[0].rstrip(':')}") from None
+    if values.get("summary_json"):
+        writable_file(values["summary_json"], "summary_json")     # before the run, not at its end
     context = Context()
-    rclpy.init(args=["flexmb_node"] + (["--ros-args"] + ros_args if ros_args else []), context=context)
+    try:
+        rclpy.init(args=["flexmb_node"] + (["--ros-args"] + ros_args if ros_args else []), context=context)
+    except (_rclpy.RCLError, _rclpy.UnknownROSArgsError) as exc:
+        raise FlexmbError(f"--ros-args {excerpt(' '.join(ros_args or []))}: {str(exc).splitlines()[0][:200]}") from None
     node = None
     try:
         node = TwinNode(values, context=context, node_name=node_name)
@@ -1119,9 +1131,7 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
         if context.ok():
             rclpy.shutdown(context=context)
     if node is not None and node.p.summary_json:
-        path = Path(node.p.summary_json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(summary, indent=2) + "\n")
+        Path(node.p.summary_json).write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
 

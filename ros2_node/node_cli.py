@@ -7,15 +7,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import random
-import shutil
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from flexmb_core.errors import FlexmbError, writable_dir
 from flexmb_io import topics as T
 
 # flag → parameter name (None: same name with '-' → '_')
@@ -60,7 +61,18 @@ def cmd_node(args: argparse.Namespace) -> int:
 
 def cmd_play(args: argparse.Namespace) -> int:
     _discovery(args)
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_node_name import validate_node_name
+
     from .player import CommandSource, run_player
+
+    for flag, v in (("--rate", args.rate), ("--timeout", args.timeout)):
+        if not (math.isfinite(v) and v > 0):
+            raise FlexmbError(f"{flag}: expected a positive number, got {v}")
+    try:
+        validate_node_name(args.twin)
+    except NameValidationException as exc:
+        raise FlexmbError(f"--twin {args.twin[:60]!r}: {str(exc).splitlines()[0].rstrip(':')}") from None
 
     if args.csv:
         if not args.names:
@@ -92,13 +104,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     _discovery(args)
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = writable_dir(args.out, "--out")
+    if not args.rate > 0 or not math.isfinite(args.rate):
+        raise FlexmbError(f"--rate: expected a positive number of commands per second, got {args.rate}")
+    if args.mcap and Path(args.mcap).exists() and (not Path(args.mcap).is_dir() or any(Path(args.mcap).iterdir())):
+        raise FlexmbError(f"--mcap {args.mcap}: already exists (a recording is never overwritten; choose a new "
+                          "path or remove it: make demo removes build/demo/bag first)")
     node_json, player_json = out / "node.json", out / "player.json"
     for f in (node_json, player_json):
         f.unlink(missing_ok=True)
-    if args.mcap and (Path(args.mcap) / "metadata.yaml").exists():
-        shutil.rmtree(args.mcap)           # the previous demo's recording (a rosbag2 directory)
     exe = [sys.executable, "-m", "flexmb.cli"]
     # the node runs until the player is done (it may start stepping before the player is up)
     node_cmd = exe + ["node", args.scene, "--mode", args.mode, "--summary-json", str(node_json), "--quiet"]
@@ -202,6 +216,11 @@ def cmd_replay_live(args: argparse.Namespace) -> int:
     _discovery(args)
     from .live_replay import replay_live
 
+    for flag, v, least in (("--timeout", args.timeout, None), ("--abs-tol", args.abs_tol, 0.0),
+                           ("--rel-tol", args.rel_tol, 0.0)):
+        if not math.isfinite(v) or (v < least if least is not None else v <= 0):
+            what = "a positive number" if least is None else "a finite number ≥ 0"
+            raise FlexmbError(f"{flag}: expected {what}, got {v}")
     return replay_live(args.bag, out=args.out, timeout=args.timeout, abs_tol=args.abs_tol, rel_tol=args.rel_tol)
 
 

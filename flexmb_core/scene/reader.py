@@ -71,7 +71,10 @@ class Node:
         v = self.value
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.fail(f"expected a number{' in ' + unit if unit else ''}, got {excerpt(v)}")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:            # an integer beyond any float
+            raise self.fail(f"expected a finite number, got an integer of {abs(v).bit_length()} bits") from None
         if not math.isfinite(v):
             raise self.fail(f"expected a finite number, got {excerpt(v)}")
         if positive and v <= 0:

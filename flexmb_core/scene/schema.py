@@ -952,7 +952,7 @@ class SolverSpec:
 
     analysis: Literal["dynamic", "static"] = "dynamic"
     integrator: Literal["newmark", "generalized_alpha", "chung_hulbert"] = "generalized_alpha"   # Arnold–Brüls
-    dt: float = spec(1e-3, positive=True, unit="s")   # time step (s); in statics the load (pseudo-time) increment
+    dt: float = spec(1e-3, positive=True, lo=1e-9, unit="s")   # time step (s, ≥ 1 ns); in statics the load (pseudo-time) increment
     until: float = spec(1.0, positive=True, unit="s")
     beta: float = spec(0.25, positive=True, hi=0.5)
     gamma: float = spec(0.5, lo=0.5, hi=1.0)

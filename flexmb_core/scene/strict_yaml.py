@@ -91,8 +91,16 @@ class StrictSceneLoader(_Base):
         return node
 
     def construct_yaml_int(self, node):
+        """An integer of the YAML 1.2 core schema (the resolver below): decimal, 0o…, 0x…."""
+        text = self.construct_scalar(node).replace("_", "")
+        sign = -1 if text.startswith("-") else 1
+        digits = text.lstrip("+-")
         try:
-            return super().construct_yaml_int(node)
+            if digits.startswith("0o"):
+                return sign * int(digits[2:], 8)
+            if digits.startswith("0x"):
+                return sign * int(digits[2:], 16)
+            return sign * int(digits, 10)
         except ValueError:                 # more than 4300 digits (int ↔ str conversion limit)
             raise _Refused(node.start_mark, f"an integer of {thousands(len(node.value))} digits; "
                                             "expected a number a scene can use") from None
@@ -120,11 +128,22 @@ class StrictSceneLoader(_Base):
         return node
 
 
+# YAML 1.2 core schema numbers instead of YAML 1.1's: PyYAML's resolvers read `1:2:3` as the
+# base-60 integer 3723 and `1:20.5` as 4820.5, and its constructor `017` as octal 15 — a scene
+# value or an --override / --param VALUE would silently become another number. Here an integer is
+# decimal, 0o octal or 0x hexadecimal (underscores allowed as digit separators), anything else
+# that is not a float below is a string, and the schema says what it expected instead.
+_INT, _FLOAT = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+StrictSceneLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag not in (_INT, _FLOAT)]
+    for first, resolvers in StrictSceneLoader.yaml_implicit_resolvers.items()}
+StrictSceneLoader.add_implicit_resolver(
+    _INT, re.compile(r"^(?:[-+]?[0-9][0-9_]*|0o[0-7_]+|0x[0-9a-fA-F_]+)$"), list("-+0123456789"))
 StrictSceneLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
                 |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-                |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
                 |[-+]?\.(?:inf|Inf|INF)
                 |\.(?:nan|NaN|NAN))$""", re.X),
     list("-+0123456789."))

@@ -13,7 +13,7 @@ import os
 from contextlib import contextmanager
 from typing import Any
 
-from ..errors import FlexmbError
+from ..errors import FlexmbError, excerpt
 
 
 class ClusterError(FlexmbError):
@@ -44,7 +44,10 @@ def connect(scheduler: Any = None, workers: int | None = None, verb: str = "flex
         try:
             client = Client(scheduler, timeout="20s")
         except (OSError, TimeoutError) as exc:
-            raise ClusterError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            raise ClusterError(f"--scheduler {excerpt(scheduler)}: cannot connect ({exc})") from None
+        except ValueError as exc:       # distributed's parse of the address (no port, no host)
+            raise ClusterError(f"--scheduler {excerpt(scheduler)}: expected a scheduler address such as "
+                               f"tcp://127.0.0.1:8786 ({exc})") from None
         try:
             yield client
         finally:

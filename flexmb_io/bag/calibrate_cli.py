@@ -8,6 +8,8 @@ import json
 import math
 from pathlib import Path
 
+from flexmb_core.errors import writable_dir, writable_file
+
 DEFAULT_OUT = "build/calibrate"
 
 HELP = """Identify scene parameters so the twin reproduces a recording: the bag's commands drive the
@@ -99,6 +101,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise CalibrationError(f"--workers must be a positive integer, got {args.workers}")
     if args.until is not None and not args.until > 0:
         raise CalibrationError(f"--until must be a positive time (s), got {args.until}")
+    if not (math.isfinite(args.diff_step) and args.diff_step > 0):
+        raise CalibrationError(f"--diff-step must be a positive relative step, got {args.diff_step}")
+    if args.max_evaluations < 1:
+        raise CalibrationError(f"--max-evaluations must be a positive integer, got {args.max_evaluations}")
+    out = writable_dir(args.out, "--out")       # before the fit: no work lost to a bad path
+    if args.json:
+        writable_file(args.json, "--json")
     noise = _noise(_flatten(args.noise))
     overrides = _flatten(args.override)
     outputs = [x for x in (args.outputs or "").split(",") if x] or None
@@ -116,8 +125,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         workers, scheduler = len(client.nthreads()), str(client.scheduler.address)
         result = fit(residuals, meas, params, start, client, measured_rms=measured_rms(meas), units=units,
                      noise=noise, diff_step=args.diff_step, max_evaluations=args.max_evaluations, progress=progress)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     scene_file = out / f"{_scene_name(meas.setup)}_calibrated.yaml"
     header = (f"# Calibrated by `flexmb calibrate {args.bag} " + " ".join(f"--fit {k}" for k in keys) + "`:\n"
               + "".join(f"#   {k} = {v:.9g} ± {e:.3g} (1σ; start {s:.6g})\n"
@@ -129,7 +136,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     (out / "calibration.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     (out / "calibration.md").write_text("```\n" + "\n".join(lines) + "\n```\n", encoding="utf-8")
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     print("\n".join(lines) + f"\nwrote {scene_file}, {out / 'calibration.json'}")
     return 0 if result.success else 3

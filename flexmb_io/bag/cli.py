@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 from flexmb_core.cli import add_run_hook
+from flexmb_core.errors import writable_file
 
 from .calibrate_cli import register as register_calibrate
 from .defaults import DEFAULT_RECORD_RATE, MAX_SHAPE_RATE
@@ -54,6 +55,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from .replay import replay
     from .replay_many import is_bag_dir
 
+    if args.json:
+        writable_file(args.json, "--json")      # before the replay: no work lost to a bad path
     if Path(args.bag).is_dir() and not is_bag_dir(Path(args.bag)):
         return _replay_dir(args)
 
@@ -65,7 +68,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def _emit(report, args: argparse.Namespace) -> int:
     """Write ``--json``, print the report (unless ``--quiet`` and all is well); the exit code."""
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
     if not args.quiet or not report.ok:
         print(report.format())

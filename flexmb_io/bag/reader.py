@@ -231,7 +231,13 @@ class BagReader:
     def scene_text(self) -> str | None:
         """The attached scene YAML, or None."""
         raw = self.attachments.get(SCENE_ATTACHMENT)
-        return None if raw is None else raw.decode("utf-8")
+        if raw is None:
+            return None
+        try:
+            return raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise BagError(f"{self.path}: the attached {SCENE_ATTACHMENT} is not UTF-8 text (byte {exc.start}: "
+                           "a damaged recording?)") from None
 
     def settings(self) -> dict[str, str]:
         """The ``flexmb`` metadata record (empty when absent)."""

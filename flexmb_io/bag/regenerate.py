@@ -45,8 +45,11 @@ def load_manifest(bags_dir: Path) -> dict:
     path = Path(bags_dir) / MANIFEST
     if not path.is_file():
         raise FlexmbError(f"{path}: no manifest (expected {MANIFEST} listing the reference bags)")
-    data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    bags = data.get("bags")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise FlexmbError(f"{path}: cannot read the manifest ({str(exc).splitlines()[0][:160]})") from None
+    bags = data.get("bags") if isinstance(data, dict) else None
     if not isinstance(bags, dict):
         raise FlexmbError(f"{path}: expected a mapping 'bags: {{name: entry}}'")
     for name, entry in bags.items():
@@ -93,7 +96,7 @@ def regenerate(bags_dir: Path, only: list[str] | None = None) -> int:
             proc = subprocess.run(argv, cwd=root, env=env)
             if proc.returncode != 0:
                 print(f"{name}: the run failed (exit {proc.returncode}); the old bag is kept", file=sys.stderr)
-                return 2
+                return 1 if proc.returncode == 1 else 2      # 1: its command is bad input (it said why)
             report = replay(out, tolerances=entry.get("tolerances") or {})
             if not report.ok or not all(f.identical for f in report.fields):
                 print(report.format(), file=sys.stderr)

@@ -87,7 +87,9 @@ def read_setup(reader: BagReader, scene_path: str | None = None) -> TwinSetup:
         When the bag has no scene (and none is given) or its settings are unreadable.
     """
     if scene_path is not None:
-        text, source = Path(scene_path).read_text(encoding="utf-8"), str(scene_path)
+        from flexmb_core.scene.loader import read_scene_text
+
+        text, source = read_scene_text(Path(scene_path)), str(scene_path)    # SceneError names the file
     else:
         text, source = reader.scene_text(), f"{reader.file}:scene.yaml"
         if text is None:

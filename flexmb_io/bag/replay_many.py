@@ -75,7 +75,7 @@ def manifest_tolerances(root: Path) -> dict[str, dict]:
         return {}
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ReplayError(f"{path}: cannot read the manifest ({excerpt(str(exc), 200)})") from None
     bags = data.get("bags") if isinstance(data, dict) else None
     if not isinstance(bags, dict):

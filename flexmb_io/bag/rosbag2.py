@@ -176,7 +176,10 @@ def read(directory: Path) -> dict:
     import yaml
 
     path = Path(directory) / METADATA_FILE
-    data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ValueError(f"{path}: not a rosbag2 metadata file (not YAML text: {str(exc).splitlines()[0][:120]})") from None
     if not isinstance(data, dict) or not isinstance(data.get("rosbag2_bagfile_information"), dict):
         raise ValueError(f"{path}: no 'rosbag2_bagfile_information' mapping (not a rosbag2 metadata file)")
     return data["rosbag2_bagfile_information"]

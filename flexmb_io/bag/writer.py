@@ -148,7 +148,10 @@ class BagWriter:
         if self.dir.exists() and (not self.dir.is_dir() or any(self.dir.iterdir())):
             raise BagError(f"{self.dir}: already exists and is not an empty directory "
                            "(a recording is never overwritten; choose a new path)")
-        self.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise BagError(f"{self.dir}: cannot create the recording's directory ({exc.strerror or exc})") from None
         self.file_name = f"{self.dir.name or 'bag'}_0.mcap"
         self.path = self.dir / self.file_name
         self._chunk_ns = int(round(chunk_seconds * 1e9))

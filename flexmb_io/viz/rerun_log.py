@@ -15,9 +15,9 @@ the 20-s Stewart run logged at 100 Hz costs ≈1 s instead of ≈6 s. A live vie
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
+
+from flexmb_core.errors import writable_file
 
 from . import blueprint as bp
 from .layout import PLATFORM_RGBA, SUPPORT_RGBA, TwinLayout, rgba8
@@ -79,7 +79,7 @@ class TwinRerunLogger:
         self.recording.set_log_tick_enabled(False)
         self.rrd_path = None if rrd_path is None else str(rrd_path)
         if self.rrd_path is not None:
-            Path(self.rrd_path).parent.mkdir(parents=True, exist_ok=True)
+            writable_file(self.rrd_path, "--rrd")   # rerun's own refusal is a RuntimeError with a traceback
             self.recording.save(self.rrd_path)
         self.flush_rows = max(1, int(flush_rows))
         self.samples = 0                       # log_sample calls

@@ -176,3 +176,64 @@ def test_a_second_signal_interrupts_at_once():
         stop.check()
     with pytest.raises(KeyboardInterrupt, match="again"):
         stop._note(2, None)
+
+
+FULL_CLI = [sys.executable, "-m", "flexmb.cli"]      # with the adapters' verbs (replay, node, play, …)
+
+
+def _refused(argv, *texts, cli=None):
+    p = subprocess.run((cli or FLEXMB) + argv, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert p.returncode == 1, (argv, p.returncode, p.stderr[-1500:])
+    assert "Traceback" not in p.stderr, p.stderr[-1500:]
+    for text in texts:
+        assert text in p.stderr, (text, p.stderr[-1500:])
+    return p
+
+
+def test_output_paths_are_checked_before_the_work(tmp_path):
+    """A directory or an unwritable place as an output file: refused at once, naming the flag — not
+    after the run, whose results would then be lost."""
+    _refused(["run", "scenes/cantilever_b1.yaml", "--until", "0.01", "--json", str(tmp_path)],
+             f"flexmb run: --json {tmp_path}: is a directory (expected the path of a file to write)")
+    _refused(["run", "scenes/cantilever_b1.yaml", "--until", "0.01", "--json", "/proc/flexmb/out.json"],
+             "flexmb run: --json /proc/flexmb/out.json: cannot write there (")
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    _refused(["replay", "bags/boom_step", "--json", str(blocker / "r.json")], f"--json {blocker / 'r.json'}: cannot "
+             "write there (", cli=FULL_CLI)
+    _refused(["sweep", "scenes/cantilever_b1.yaml", "--param", "solver.tolerance=1e-8,1e-9", "--out", str(blocker)],
+             f"flexmb sweep: --out {blocker}: exists and is not a directory")
+
+
+def test_numbers_the_tools_cannot_honour_are_refused(tmp_path):
+    _refused(["run", "scenes/cantilever_b1.yaml", "--until", "0.01", "--dt", "1e-300"],
+             "scenes/cantilever_b1.yaml:solver.dt: expected a number ≥ 1e-09, got 1e-300")
+    _refused(["commands", "stewart", "--out", str(tmp_path / "c.csv"), "--dt", "1e-12"],
+             "flexmb commands: --dt 1e-12: 20 000 000 000 001 rows over --until 20 s; at most 10 000 000")
+    sweep = ["sweep", "scenes/cantilever_b1.yaml", "--param", "materials.steel.E=1e11:2e11", "--out", str(tmp_path)]
+    _refused(sweep + ["--samples", "0"], "flexmb sweep: --samples: expected 1 to 1000000 runs, got 0")
+    _refused(sweep + ["--samples", "4", "--seed", "-1"], "flexmb sweep: --seed: expected a non-negative integer, got -1")
+    _refused(sweep + ["--samples", "4", "--scheduler", "notanaddress"],
+             "flexmb sweep: --scheduler 'notanaddress': expected a scheduler address such as tcp://127.0.0.1:8786")
+
+
+def test_a_replay_scene_that_cannot_be_read_names_the_file(tmp_path):
+    _refused(["replay", "bags/boom_step", "--scene", str(tmp_path / "nope.yaml")],
+             f"{tmp_path / 'nope.yaml'}: cannot read scene file (No such file or directory)", cli=FULL_CLI)
+
+
+def test_ros_verbs_refuse_bad_flags_before_any_dds(tmp_path):
+    scene = "scenes/stewart_platform_bars.yaml"
+    _refused(["play", scene, "--rate", "0"], "flexmb play: --rate: expected a positive number, got 0.0", cli=FULL_CLI)
+    _refused(["play", scene, "--twin", "bad!name"], "flexmb play: --twin 'bad!name': Invalid node name", cli=FULL_CLI)
+    _refused(["node", scene, "--name", "bad!name"], "flexmb node: --name 'bad!name': Invalid node name", cli=FULL_CLI)
+    _refused(["node", scene, "--summary-json", str(tmp_path)], f"flexmb node: summary_json {tmp_path}: is a directory",
+             cli=FULL_CLI)
+    _refused(["replay-live", "bags/boom_step", "--out", str(tmp_path / "o"), "--abs-tol", "-1"],
+             "flexmb replay-live: --abs-tol: expected a finite number ≥ 0, got -1.0", cli=FULL_CLI)
+    existing = tmp_path / "bag"
+    existing.mkdir()
+    (existing / "metadata.yaml").write_text("keep me\n")
+    _refused(["demo", scene, "--mcap", str(existing), "--out", str(tmp_path / "demo")],
+             f"flexmb demo: --mcap {existing}: already exists (a recording is never overwritten", cli=FULL_CLI)
+    assert (existing / "metadata.yaml").read_text() == "keep me\n"

@@ -107,6 +107,28 @@ def test_exponent_floats_without_sign_are_numbers(tmp_path):
     assert scene.materials["steel"].E == 200.0e9
 
 
+@pytest.mark.parametrize("text,value", [("017", 17), ("0o17", 15), ("0x1F", 31), ("1_000", 1000), ("-.5", -0.5),
+                                        ("+.5e3", 500.0), ("1:2:3", "1:2:3"), ("1:20.5", "1:20.5")])
+def test_numbers_are_read_by_the_yaml_1_2_core_schema(text, value):
+    """No base-60 integers or floats (YAML 1.1 reads '1:2:3' as 3723) and no octal '017': a scene
+    value, an --override or a --param VALUE is the number it looks like, or a string the schema refuses."""
+    from flexmb_core.scene.loader import parse_yaml
+
+    assert parse_yaml(f"v: {text}")["v"] == value
+
+
+def test_a_base_60_looking_value_and_an_integer_beyond_floats_are_refused_naming_the_key(tmp_path):
+    text = (SCENES / "cantilever_b1.yaml").read_text()
+    assert "E: 200.0e9" in text
+    for bad, expect in (("1:2:3", "expected a number in Pa, got '1:2:3'"),
+                        ("1" + "0" * 400, "expected a finite number, got an integer of 1329 bits")):
+        p = tmp_path / "bad.yaml"
+        p.write_text(text.replace("E: 200.0e9", f"E: {bad}"))
+        with pytest.raises(SceneError) as err:
+            load_scene(p)
+        assert f"bad.yaml:materials.steel.E: {expect}" in str(err.value)
+
+
 def test_shipped_scenes_compile():
     for path in sorted(SCENES.glob("*.yaml")):
         model = compile_scene(load_scene(path))
