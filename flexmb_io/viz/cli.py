@@ -40,8 +40,12 @@ def cmd_view(args: argparse.Namespace) -> int:
     from .snapshot import SnapshotUnavailable, open_viewer, screenshot
 
     _require_rerun("flexmb view")
-    if not args.period >= 0:
+    if not (math.isfinite(args.period) and args.period >= 0):
         raise FlexmbError(f"--period must be ≥ 0 s, got {args.period}")
+    size = args.window_size.split("x")
+    if len(size) != 2 or not all(x.isdigit() and 0 < int(x) <= 16384 for x in size):
+        raise FlexmbError(f"--window-size: expected WIDTHxHEIGHT in points (1 to 16384 each), e.g. 1600x900, "
+                          f"got {args.window_size[:40]!r}")
     if not (args.exaggerate > 0 and math.isfinite(args.exaggerate)):
         raise FlexmbError(f"--exaggerate must be a finite factor > 0, got {args.exaggerate}")
     if args.exaggerate != 1.0 and Path(args.recording).suffix == ".rrd":

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+from flexmb_core.errors import FlexmbError
+
 DEFAULT_PERIOD = 0.01     # s of simulated time between logged states (100 frames per simulated second)
 
 
@@ -85,4 +87,7 @@ def make_hook(args, scene, model) -> RerunRunHook | None:
     path = getattr(args, "rrd", None)
     if not path:
         return None
-    return RerunRunHook(model, path, getattr(args, "rrd_period", DEFAULT_PERIOD))
+    period = getattr(args, "rrd_period", DEFAULT_PERIOD)
+    if not (math.isfinite(period) and period >= 0):
+        raise FlexmbError(f"--rrd-period must be a time ≥ 0 s (0: every step), got {period}")
+    return RerunRunHook(model, path, period)

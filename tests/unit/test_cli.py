@@ -237,3 +237,18 @@ def test_ros_verbs_refuse_bad_flags_before_any_dds(tmp_path):
     _refused(["demo", scene, "--mcap", str(existing), "--out", str(tmp_path / "demo")],
              f"flexmb demo: --mcap {existing}: already exists (a recording is never overwritten", cli=FULL_CLI)
     assert (existing / "metadata.yaml").read_text() == "keep me\n"
+
+
+def test_viewing_and_playing_flags_are_checked_up_front(tmp_path):
+    _refused(["run", "scenes/cantilever_b1.yaml", "--until", "0.01", "--rrd", str(tmp_path / "a.rrd"),
+              "--rrd-period", "nan"], "flexmb run: --rrd-period must be a time ≥ 0 s (0: every step), got nan",
+             cli=FULL_CLI)
+    _refused(["view", "bags/boom_step", "--png", str(tmp_path / "a.png"), "--window-size", "0x0"],
+             "flexmb view: --window-size: expected WIDTHxHEIGHT in points (1 to 16384 each), e.g. 1600x900, got '0x0'",
+             cli=FULL_CLI)
+    table = tmp_path / "t.csv"
+    table.write_text("0,1,1\n0.001,nan,1\n")
+    _refused(["play", "--csv", str(table), "--names", "a,b"],
+             f"flexmb play: {table}: row 2 of the table holds a value that is not a finite number", cli=FULL_CLI)
+    _refused(["play", "--csv", str(table), "--names", "a,a"],
+             "flexmb play: --names 'a,a': expected distinct, non-empty actuator names", cli=FULL_CLI)
