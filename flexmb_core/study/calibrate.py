@@ -68,8 +68,8 @@ def parse_fit(item: str) -> FitParam:
     OverrideError
         On bad syntax or bounds (the message names ``--fit`` and the item).
     """
-    key, _, rng = item.partition("=")
-    if not split_key(key):
+    key, eq, rng = item.partition("=")
+    if not split_key(key) or (eq and not rng):
         raise OverrideError(f"--fit {item!r}: expected KEY or KEY=LO:HI, e.g. materials.steel.E=1.5e11:2.5e11")
     if not rng:
         return FitParam(".".join(split_key(key)))

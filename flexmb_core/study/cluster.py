@@ -53,9 +53,12 @@ def connect(scheduler: Any = None, workers: int | None = None, verb: str = "flex
         finally:
             client.close()
         return
+    # CRITICAL: a task that raises (a calibration run whose scene the fit's step made invalid) is
+    # reported by flexmb in one line; the worker's own ERROR record would print its traceback first.
+    # A lost worker or task still reaches the client as an exception (sweep: error_kind 'lost').
     cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                           worker_dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                           worker_dashboard_address="127.0.0.1:0", silence_logs=logging.CRITICAL)
     client = Client(cluster)
     try:
         yield client

@@ -54,10 +54,14 @@ def parse_tolerances(items: list[str] | None, base: dict | None = None) -> dict[
     """
     tol = dict(DEFAULT_TOLERANCES)
     pairs = list((base or {}).items())
+    given: set[str] = set()
     for item in items or ():
         if "=" not in item:
             raise ToleranceError(f"--tolerance {item!r}: expected KEY=VALUE, e.g. length=1e-8")
         k, v = item.split("=", 1)
+        if k.strip() in given:
+            raise ToleranceError(f"--tolerance {k.strip()!r} given twice; give each key once")
+        given.add(k.strip())
         pairs.append((k.strip(), v.strip()))
     for k, v in pairs:
         if k not in tol:
@@ -68,5 +72,7 @@ def parse_tolerances(items: list[str] | None, base: dict | None = None) -> dict[
             raise ToleranceError(f"tolerance {k}={v!r} is not a number") from None
         if not (x >= 0 and math.isfinite(x)):
             raise ToleranceError(f"tolerance {k}={v!r} must be finite and ≥ 0")
+        if k == "converged" and x != int(x):
+            raise ToleranceError(f"tolerance converged={v!r} counts samples: expected a whole number ≥ 0")
         tol[k] = x
     return tol

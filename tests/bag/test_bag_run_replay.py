@@ -141,6 +141,8 @@ def test_a_shortened_last_step_replays_exactly(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--tolerance", "lenght=1e-3"], "unknown tolerance 'lenght'"),
     (["--tolerance", "force=-1"], "must be finite and ≥ 0"),
+    (["--tolerance", "converged=0.5"], "tolerance converged='0.5' counts samples: expected a whole number ≥ 0"),
+    (["--tolerance", "length=1e-8", "length=1e-6"], "--tolerance 'length' given twice; give each key once"),
     (["--override", "materials.titanium.E=1e11"], "the scene has no key 'materials.titanium'"),
     (["--override", "materials.steel.E=-5"], "materials.steel.E"),
 ])

@@ -220,6 +220,7 @@ def test_estimated_noise_matches_the_added_noise(client):
     ("materials.steel.E=1:", "bounds must be LO:HI with finite numbers LO < HI, got '1:'"),
     ("materials.steel.E=3:2", "bounds must be LO:HI with finite numbers LO < HI, got '3:2'"),
     ("=1:2", "expected KEY or KEY=LO:HI"),
+    ("materials.steel.E=", "expected KEY or KEY=LO:HI"),
 ])
 def test_bad_fit_items_are_refused(item, message):
     with pytest.raises(OverrideError, match=message.replace("(", r"\(").replace(")", r"\)")):
