@@ -129,7 +129,7 @@ class CommandSource:
             raise FlexmbError(f"--names {','.join(names)[:120]!r}: expected distinct, non-empty actuator names")
         if not np.all(np.isfinite(data)):
             row = int(np.argwhere(~np.isfinite(data))[0, 0])
-            raise FlexmbError(f"{path}: row {row + 1} of the table holds a value that is not a finite number "
+            raise FlexmbError(f"{path}: data row {row + 1} of the table holds a value that is not a finite number "
                               f"({np.array2string(data[row][:7], precision=6)[:120]})")
         if data.shape[1] not in (1 + n, 1 + 2 * n):
             raise FlexmbError(f"{path}: expected columns t, {n} lengths[, {n} rates], got {data.shape[1]} columns")

@@ -249,6 +249,6 @@ def test_viewing_and_playing_flags_are_checked_up_front(tmp_path):
     table = tmp_path / "t.csv"
     table.write_text("0,1,1\n0.001,nan,1\n")
     _refused(["play", "--csv", str(table), "--names", "a,b"],
-             f"flexmb play: {table}: row 2 of the table holds a value that is not a finite number", cli=FULL_CLI)
+             f"flexmb play: {table}: data row 2 of the table holds a value that is not a finite number", cli=FULL_CLI)
     _refused(["play", "--csv", str(table), "--names", "a,a"],
              "flexmb play: --names 'a,a': expected distinct, non-empty actuator names", cli=FULL_CLI)
