@@ -414,9 +414,7 @@ def _tune_where(args: argparse.Namespace, search):
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .study.progress import ProgressBar
-    from .study.sweep import sweep
-
-    from .study.sweep import DEFAULT_OUT
+    from .study.sweep import DEFAULT_OUT, sweep
 
     params = [x for group in (args.param or []) for x in group]
     outputs = [x for x in (args.outputs or "").split(",") if x] or None

@@ -1105,14 +1105,8 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
     """Initialise rclpy, run one :class:`TwinNode` to its end, shut down; returns the summary."""
     import rclpy
     from rclpy.context import Context
-    from rclpy.exceptions import NameValidationException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-    from rclpy.validate_node_name import validate_node_name
 
-    try:
-        validate_node_name(node_name)
-    except NameValidationException as exc:
-        raise FlexmbError(f"--name {excerpt(node_name)}: {str(exc).splitlines()[0].rstrip(':')}") from None
     if values.get("summary_json"):
         writable_file(values["summary_json"], "summary_json")     # before the run, not at its end
     context = Context()

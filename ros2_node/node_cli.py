@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from flexmb_core.errors import FlexmbError, writable_dir
+from flexmb_core.errors import FlexmbError, excerpt, writable_dir
 from flexmb_io import topics as T
 
 # flag → parameter name (None: same name with '-' → '_')
@@ -38,9 +38,32 @@ def _discovery(args: argparse.Namespace) -> None:
         print(f"flexmb {args.verb}: {note}", file=sys.stderr)
 
 
+def _check_numbers(*checks: tuple[str, float, bool]) -> None:
+    """``(flag, value, zero_allowed)``: each value a finite number > 0 (≥ 0 where zero is allowed),
+    else :class:`FlexmbError` naming the flag — before anything starts on DDS."""
+    for flag, v, zero_allowed in checks:
+        if not math.isfinite(v) or v < 0 or (v == 0 and not zero_allowed):
+            raise FlexmbError(f"{flag}: expected {'a finite number ≥ 0' if zero_allowed else 'a positive number'}, "
+                              f"got {v}")
+
+
+def _check_node_name(name: str, flag: str) -> None:
+    """rclpy's own rule for a node name, as :class:`FlexmbError` naming ``flag`` (rclpy raises it
+    later, from inside the node's constructor, with a traceback and a warning)."""
+    from rclpy.exceptions import NameValidationException
+    from rclpy.validate_node_name import validate_node_name
+
+    try:
+        validate_node_name(name)
+    except NameValidationException as exc:
+        raise FlexmbError(f"{flag} {excerpt(name)}: {str(exc).splitlines()[0].rstrip(':')}") from None
+
+
 def cmd_node(args: argparse.Namespace) -> int:
     _discovery(args)
     from .node import run_node
+
+    _check_node_name(args.name, "--name")
 
     values = {"scene": args.scene}
     for flag in _NODE_FLAGS:
@@ -61,19 +84,10 @@ def cmd_node(args: argparse.Namespace) -> int:
 
 def cmd_play(args: argparse.Namespace) -> int:
     _discovery(args)
-    from rclpy.exceptions import NameValidationException
-    from rclpy.validate_node_name import validate_node_name
-
     from .player import CommandSource, run_player
 
-    for flag, v in (("--rate", args.rate), ("--timeout", args.timeout)):
-        if not (math.isfinite(v) and v > 0):
-            raise FlexmbError(f"{flag}: expected a positive number, got {v}")
-    try:
-        validate_node_name(args.twin)
-    except NameValidationException as exc:
-        raise FlexmbError(f"--twin {args.twin[:60]!r}: {str(exc).splitlines()[0].rstrip(':')}") from None
-
+    _check_numbers(("--rate", args.rate, False), ("--timeout", args.timeout, False))
+    _check_node_name(args.twin, "--twin")
     if args.csv:
         if not args.names:
             print("flexmb play: --csv needs --names leg1,leg2,... (actuator order of the columns)", file=sys.stderr)
@@ -105,8 +119,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
     out = writable_dir(args.out, "--out")
-    if not args.rate > 0 or not math.isfinite(args.rate):
-        raise FlexmbError(f"--rate: expected a positive number of commands per second, got {args.rate}")
+    _check_numbers(("--rate", args.rate, False))
     if args.mcap and Path(args.mcap).exists() and (not Path(args.mcap).is_dir() or any(Path(args.mcap).iterdir())):
         raise FlexmbError(f"--mcap {args.mcap}: already exists (a recording is never overwritten; choose a new "
                           "path or remove it: make demo removes build/demo/bag first)")
@@ -216,11 +229,8 @@ def cmd_replay_live(args: argparse.Namespace) -> int:
     _discovery(args)
     from .live_replay import replay_live
 
-    for flag, v, least in (("--timeout", args.timeout, None), ("--abs-tol", args.abs_tol, 0.0),
-                           ("--rel-tol", args.rel_tol, 0.0)):
-        if not math.isfinite(v) or (v < least if least is not None else v <= 0):
-            what = "a positive number" if least is None else "a finite number ≥ 0"
-            raise FlexmbError(f"{flag}: expected {what}, got {v}")
+    _check_numbers(("--timeout", args.timeout, False), ("--abs-tol", args.abs_tol, True),
+                   ("--rel-tol", args.rel_tol, True))
     return replay_live(args.bag, out=args.out, timeout=args.timeout, abs_tol=args.abs_tol, rel_tol=args.rel_tol)
 
 

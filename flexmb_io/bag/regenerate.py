@@ -22,7 +22,7 @@ import yaml
 
 from flexmb_core.errors import FlexmbError
 
-MANIFEST = "manifest.yaml"
+from .replay_many import MANIFEST, manifest_bags
 HEADER = """\
 # Reference recordings of flexmb (issue 6). tests/bag/test_replay_bags.py replays every bag listed
 # here with `flexmb replay BAG --tolerance <tolerances>` and requires exit code 0; a change of the
@@ -45,13 +45,7 @@ def load_manifest(bags_dir: Path) -> dict:
     path = Path(bags_dir) / MANIFEST
     if not path.is_file():
         raise FlexmbError(f"{path}: no manifest (expected {MANIFEST} listing the reference bags)")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise FlexmbError(f"{path}: cannot read the manifest ({str(exc).splitlines()[0][:160]})") from None
-    bags = data.get("bags") if isinstance(data, dict) else None
-    if not isinstance(bags, dict):
-        raise FlexmbError(f"{path}: expected a mapping 'bags: {{name: entry}}'")
+    bags = manifest_bags(path)
     for name, entry in bags.items():
         if not isinstance(entry, dict) or not isinstance(entry.get("command"), str):
             raise FlexmbError(f"{path}:bags.{name}: expected a mapping with a 'command' string")

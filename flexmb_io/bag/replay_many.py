@@ -62,6 +62,26 @@ def find_bags(root: Path) -> list[Path]:
     return sorted(found, key=lambda p: p.relative_to(root).as_posix())
 
 
+def manifest_bags(path: Path) -> dict:
+    """The ``bags`` mapping (name → entry) of the manifest file ``path`` (``bags/manifest.yaml``'s
+    format), for the replay of a directory and ``flexmb bag regenerate`` alike.
+
+    Raises
+    ------
+    ReplayError
+        When the file cannot be read, is not YAML or has no ``bags`` mapping.
+    """
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ReplayError(f"{path}: cannot read the manifest ({excerpt(str(exc), 200)})") from None
+    bags = data.get("bags") if isinstance(data, dict) else None
+    if not isinstance(bags, dict):
+        raise ReplayError(f"{path}: expected a mapping 'bags: {{NAME: {{tolerances: {{KEY: VALUE}}}}}}', "
+                          f"got {excerpt(repr(data), 80)}")
+    return bags
+
+
 def manifest_tolerances(root: Path) -> dict[str, dict]:
     """Bag name → tolerances mapping of ``root/manifest.yaml`` ({} without a manifest).
 
@@ -73,14 +93,7 @@ def manifest_tolerances(root: Path) -> dict[str, dict]:
     path = Path(root) / MANIFEST
     if not path.is_file():
         return {}
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ReplayError(f"{path}: cannot read the manifest ({excerpt(str(exc), 200)})") from None
-    bags = data.get("bags") if isinstance(data, dict) else None
-    if not isinstance(bags, dict):
-        raise ReplayError(f"{path}: expected a mapping 'bags: {{NAME: {{tolerances: {{KEY: VALUE}}}}}}', "
-                          f"got {excerpt(repr(data), 80)}")
+    bags = manifest_bags(path)
     out = {}
     for name, entry in bags.items():
         entry = {} if entry is None else entry
