@@ -116,6 +116,10 @@ DYNAMIC = {
         ("stewart_platform_bars", 400), ("stewart_platform_1el", 60), ("stewart_platform_1el_truss", 60),
         ("deployable_boom", 150), ("rps_manipulator", 150), ("boom_step", 100), ("stewart_platform_shell", 150),
         ("right_angle_cantilever", 100), ("tendon_arm", 100), ("spin_up", 150), ("radiator_panels", 60))},
+    # the held tangent as formed, not following the shells' rotation (solver.held_tangent): the
+    # references recorded before the corotated one became the default (2026-11-30), unchanged
+    **{f"scene_{s}_fixed": ((lambda s=s: scene_sim(s, {"held_tangent": "fixed"})), n) for s, n in (
+        ("stewart_platform_shell", 150), ("radiator_panels", 60))},
 }
 
 

@@ -6,7 +6,8 @@ predictor and driven supports, the residual and (held or refreshed) tangent of e
 the bars, every shell group, the multiplier constraints (rigid corners, off-plane hinges, director
 ties) and the moment loads, the inertial residual, the skyline LU factor and solve (static pivoting,
 augmentation and refinement where the factors are suspect: :func:`~.packs.factor_packed`,
-:func:`~.packs.solve_packed`), the modified-Newton refresh rule, the rates, the energies and the
+:func:`~.packs.solve_packed`), the modified-Newton refresh rule and the held tangent that follows
+the shells' rotation (:mod:`~flexmb_core.kernels.corotation`), the rates, the energies and the
 step guard's checks. It is the only Newton of dynamics: until 2026-11-29 a Python loop made the
 attempts whose tangent the skyline LU handed to SuperLU, and the two were bit-identical; the
 step references of that time (``tests/step_cases.py``) hold it to those results.
@@ -33,10 +34,11 @@ import numpy as np
 from numba import njit
 
 from ..jit import KERNEL
+from ..kernels.corotation import body_rotations, rotate_triplets
 from ..kernels.guard import dynamic_guard, frame_orientation
 from ..model.model import Model
 from ..model.step_data import (C_T, C_T_HIST, C_T_PREV, D_A, D_ATIL, D_CLOCK, D_GVEC, D_LAM, D_LAMCAND, D_LAMHIST,
-                               D_LAMRATE, D_LED, D_MULT, D_Q, D_REACT, D_TAN, D_V)
+                               D_LAMRATE, D_LED, D_MULT, D_Q, D_QREF, D_REACT, D_TAN, D_V)
 from ..scene.schema import SolverSpec
 from ..signals import evaluate
 from ..solvers.result import StepResult
@@ -44,8 +46,9 @@ from .energy import _energies
 from .fused import advance_stretches, apply_increment, inertial_residual, update_rates, velocity_at
 from .packs import (F_ACT, F_EDOFS, F_GDPHI, F_GIDET, F_GILEN, F_GPHI, L_BI, L_BJ, L_BV, L_CP, L_DQ, L_DRIVE, L_DRVIDX,
                     L_DRVVAL, L_DSCALE, L_FPOS, L_FREE, L_FVDOFS, L_GRAV, L_INVS, L_IVEC, L_KDATA, L_LAMN, L_MASSK,
-                    L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_Q0, L_QEVAL, L_QL, L_RATEN, L_RC, L_RF, L_VEVAL,
-                    L_WBUF, L_ZLAM, NF, N_PAR, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM, P_CMASS, P_CONTRACTION, P_DAMPED,
+                    L_MI, L_MJ, L_MULTN, L_MV, L_MVDOFS, L_PAR, L_Q0, L_QEVAL, L_QL, L_RATEN, L_RBODY, L_RC, L_RF,
+                    L_RMAT, L_RNODE, L_RRHS, L_VEVAL, L_WBUF, L_ZLAM, NF, N_PAR, P_AF, P_AM, P_BAL, P_BETA, P_CH, P_CM,
+                    P_CMASS, P_CONTRACTION, P_COROT, P_DAMPED,
                     P_F0, P_GAMMA, P_KEEP, P_MAXAGE, P_MAXIT, P_MBLOCK, P_MINPIV, P_MODIFIED, P_NFG, P_NMULT, P_PIVTOL,
                     P_RISE, P_SVK, P_TOL, ModelPacks, assemble_packed, factor_packed, moment_work_packed,
                     singular_note, solve_packed, unknown_fields, view1, view2)
@@ -107,7 +110,8 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     their rate (1/s): ``rate_new (na,)`` when ``rate_given``, else the backward difference over
     the stretch history (:func:`begin_stretches`), which moves on when the step is accepted
     (:func:`accept_stretches`); a failed step leaves λ_n and its rate. Its ``tan`` in/out: the
-    held tangent [held, coefficient, age, refreshes]; ``led`` in/out: the guard's ledger [il, ir,
+    held tangent [held, coefficient, age, refreshes], and ``q_ref`` the unknowns it was formed at
+    (with ``P_COROT``, each shell's rotation since then rotates its solves); ``led`` in/out: the guard's ledger [il, ir,
     t, K + U, candidate K + U] (advanced here when the step is accepted) with its rows ``gvec,
     react``. The guard's energy balance (check 3) applies to steps that move no actuator. The GIL
     is released: a caller's other threads (the node's executor) run while the step does. Shared
@@ -235,6 +239,16 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     coef = c_a + c_m * c_v
     held = tan[0] != 0.0
     refresh = (not modified) or (not held) or tan[1] != coef or tan[2] >= max_age
+    # a held tangent follows the shells' rotation since it was formed (kernels/corotation.py)
+    q_ref = view1(d, dlay[D_QREF])
+    rot_nodes = view2(ci, lay[L_RNODE])
+    rot_ptr = view1(ci, lay[L_RBODY])
+    rot = view2(wf, lay[L_RMAT])
+    rot_rhs = view1(wf, lay[L_RRHS])
+    corot = par[P_COROT] != 0.0
+    rotated = corot and not refresh
+    if rotated:
+        body_rotations(q, q_ref, rot_nodes, rot_ptr, rot)
     prev_inc = math.inf
     io[IO_OMEGA] = 0.0
     inc = math.inf
@@ -293,9 +307,20 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
             tan[1] = coef
             tan[2] = 0.0
             tan[3] += 1.0
+            if corot:
+                for i in range(n):
+                    q_ref[i] = q_force[i]
+                rotated = False
         # a solve that refinement could not make accurate (a singular tangent) still gives a
         # regularized direction: whether it leads to a root is the convergence test's to say
-        omega = solve_packed(rf, dq, env, inv_diag, lu_stats, wf, wi, lay, par)
+        if rotated:                 # Δq = R A₀⁻¹ Rᵀ r
+            for i in range(rf.size):
+                rot_rhs[i] = rf[i]
+            rotate_triplets(rot_rhs, rot_nodes, rot_ptr, rot, True)
+            omega = solve_packed(rot_rhs, dq, env, inv_diag, lu_stats, wf, wi, lay, par)
+            rotate_triplets(dq, rot_nodes, rot_ptr, rot, False)
+        else:
+            omega = solve_packed(rf, dq, env, inv_diag, lu_stats, wf, wi, lay, par)
         if omega > io[IO_OMEGA]:
             io[IO_OMEGA] = omega
         inc = apply_increment(q, free, dq, -1.0, inv_scale)
@@ -482,6 +507,7 @@ class NumbaStep:
         par[P_CMASS], par[P_PIVTOL], par[P_MINPIV] = guard._c_mass, sky.pivot_tol, integ.lu.min_pivot_ratio
         par[P_DAMPED] = bool(m.material_damping)
         par[P_CH] = spec.integrator == "chung_hulbert"
+        par[P_COROT] = spec.newton == "modified" and spec.held_tangent == "corotated" and bool(m.shells)
         # accept_flagged keeps a failed attempt's last iterate
         par[P_KEEP] = spec.on_unconverged == "accept_flagged"
         self.packs = ModelPacks(m, ws, sky, guard, integ._inv_scale, integ._mass, integ._mass_blocks, par)

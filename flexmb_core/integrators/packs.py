@@ -25,6 +25,7 @@ from numba.extending import register_jitable
 
 from ..jit import KERNEL
 from ..kernels.constraints import director_tie_group, hinge_group, rigid_corner_group
+from ..kernels.corotation import rotation_bodies
 from ..kernels.frame3d import frame_group, frame_scratch
 from ..kernels.guard import conservative_moment_work
 from ..kernels.moments import conservative_moments, follower_moments
@@ -48,7 +49,9 @@ from .views import view1, view2, view3, view4
  L_KPTR, L_KIDX,                                 # wi (writable like the skyline's, for one signature)
  L_KREF, L_RES, L_CORR, L_KRYLOV, L_HESS, L_ROT, L_RHS, L_AUGRHO,                               # wf
  L_AUGA, L_AUGB, L_AUGD, L_GPOS, L_GROW,                                                      # wi
- N_ITEMS) = range(101)
+ L_RNODE, L_RBODY,                                                                            # ci
+ L_RMAT, L_RRHS,                                                                              # wf
+ N_ITEMS) = range(105)
 # Items of one frame group (rows F0 + k·NF + item).
 (F_DAX, F_DSEC, F_W, F_MAT,                                                                   # cf
  F_EDOFS, F_ACT, F_SMAP, F_NSEC,                                                              # ci
@@ -61,7 +64,7 @@ S_PHI, S_DPHI, S_ZETA, S_A0INV, S_W, S_MAT, S_EDOFS, S_SMAP, S_CONST, NS = range
 # Step constants in the L_PAR block of cf.
 (P_AM, P_AF, P_BETA, P_GAMMA, P_CM, P_TOL, P_MAXIT, P_MODIFIED, P_CONTRACTION, P_MAXAGE, P_SVK, P_RISE, P_BAL,
  P_CMASS, P_PIVTOL, P_MINPIV, P_ACCUM, P_DAMPED, P_NFG, P_NSG, P_F0, P_S0, P_NMULT, P_KEEP, P_MBLOCK,
- P_CH, N_PAR) = range(27)
+ P_CH, P_COROT, N_PAR) = range(28)
 
 
 # The tangent's factorization and solve, shared by the numba steps of dynamics and statics.
@@ -403,6 +406,11 @@ class ModelPacks:
                           *zip((L_RES, L_CORR, L_KRYLOV, L_HESS, L_ROT), refine_scratch(m.nsys)),
                           (L_RHS, np.zeros(m.nsys)), (L_AUGRHO, np.zeros(1))):
             wf.add(item, arr)
+        rot_nodes, rot_ptr = rotation_bodies(m)
+        ci.add(L_RNODE, rot_nodes)
+        ci.add(L_RBODY, rot_ptr)
+        wf.add(L_RMAT, np.zeros((rot_ptr.size - 1, 9)))
+        wf.add(L_RRHS, np.zeros(m.nsys if rot_ptr.size > 1 else 0))
         for item, arr in zip(range(L_SDV, L_SKE + 1), shell_scratch()):
             wf.add(item, arr)
         for item, arr in ((L_SLOT, sky._slot), (L_ZSLOT, sky._zero_slots), (L_BASE, sky._base),

@@ -32,7 +32,7 @@ from .workspace import State
 # Items of the buffer (rows of the layout table, [offset, d0, d1, d2, d3, size] as the packs'
 # rows, so that the packs' view helpers read them).
 (D_CLOCK, D_Q, D_V, D_A, D_ATIL, D_LAM, D_LAMRATE, D_LAMHIST, D_LAMCAND, D_MULT, D_SERVOX, D_SERVOV, D_TAN,
- D_LED, D_GVEC, D_REACT, N_DATA) = range(17)
+ D_LED, D_GVEC, D_REACT, D_QREF, N_DATA) = range(18)
 # Slots of the clock item: t (s); the stretch history's λ_{n−1} time and the time of the state it
 # belongs to (NaN: no history, the next rate is a first-order difference).
 C_T, C_T_PREV, C_T_HIST = range(3)
@@ -54,8 +54,10 @@ def data_shapes(model: Model) -> list[tuple[int, ...]]:
     servo = model.actuators.servo
     ns = 0 if servo is None else servo.size
     nd = drive_dof_ids(model).size
+    # q_ref: the unknowns the held tangent was formed at, for models whose held tangent follows
+    # their shells' rotation (kernels/corotation.py)
     return [(4,), (n,), (n,), (n,), (n,), (na,), (na,), (na,), (na,), (nm,), (ns,), (ns,), (4,), (5,), (6, n),
-            (2, nd)]
+            (2, nd), (n if model.shells else 0,)]
 
 
 class BoundState(State):
@@ -93,6 +95,8 @@ class StepData:
     clock : (4,) — [t (s), t_prev (s), t_hist (s), unused].
     lam_hist, lam_cand : (na,) — λ_{n−1} and the candidate λ_n of the step under way.
     tan : (4,) — held tangent [held, coefficient, age, factorizations].
+    q_ref : (ndof,) or (0,) — the unknowns the held tangent was formed at (models with shells:
+        their rotation since then is the held tangent's, :mod:`flexmb_core.kernels.corotation`).
     led : (5,) — the guard's ledger [il, ir, t, K + U, candidate K + U]; gvec (6, ndof) and
         react (2, nd) its rows (:class:`~flexmb_core.solvers.guard.StepGuard`).
     """
@@ -118,6 +122,7 @@ class StepData:
         self.lam_hist = self.item(D_LAMHIST)
         self.lam_cand = self.item(D_LAMCAND)
         self.tan = self.item(D_TAN)
+        self.q_ref = self.item(D_QREF)
         self.led = self.item(D_LED)
         self.gvec = self.item(D_GVEC)
         self.react = self.item(D_REACT)

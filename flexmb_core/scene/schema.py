@@ -966,6 +966,9 @@ class SolverSpec:
     newton: Literal["full", "modified"] = "full"           # modified: tangent reuse
     modified_contraction: float = spec(0.25, positive=True, hi=0.9)   # refresh when |Δq_k| > this · |Δq_k−1|
     tangent_max_age: int = spec(100, lo=1, hi=10**9)                  # steps a held tangent may serve
+    # dynamics, modified Newton: the held tangent follows each shell's rotation since it was
+    # formed (kernels/corotation.py) | is used as formed
+    held_tangent: Literal["corotated", "fixed"] = "corotated"
     control: Literal["load", "arc_length", "displacement"] = spec("load", when=_STATIC)
     arc_length: ArcLengthSpec | None = spec(None, when=_STATIC + (("control", ("arc_length",)),))
     displacement: DisplacementControlSpec | None = spec(None, when=_STATIC + (("control", ("displacement",)),))

@@ -101,7 +101,7 @@ def _frame_extras() -> dict:
                                    "signal": 0.5}}
     d["solver"] = {"analysis": "dynamic", "initial_acceleration": "zero", "max_substep_levels": 2,
                    "on_unconverged": "stop", "newton": "modified", "modified_contraction": 0.5,
-                   "tangent_max_age": 10}
+                   "tangent_max_age": 10, "held_tangent": "fixed"}
     d["limits"] = {"max_actuator_force": 5.0e4, "singular_configurations": "ignore", "on_violation": "stop"}
     return d
 
