@@ -56,7 +56,7 @@ from flexmb_io.wire import serialize
 
 from .convert import message_class, to_dict
 from .logsink import DeferredLogger
-from .params import SPECS, NodeParams
+from .params import BY_NAME, SPECS, NodeParams
 from .taking import TAKE_MAX, take_waiting_received
 
 # s a thread may hold the GIL while another waits for it (Python's default 5 ms is five steps)
@@ -138,6 +138,7 @@ class TwinNode:
             if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
                 value = float(value)
             effective[spec.name] = _declare(self.node, spec, value, desc)
+        _refuse_unknown_overrides(self.node)
         self.p = NodeParams.from_values(effective)
         if self.p.mode == "lockstep" and self.p.command_source == "scene":
             raise FlexmbError("parameter 'mode': lockstep steps once per received command, so it needs "
@@ -485,7 +486,7 @@ class TwinNode:
     def _on_set_parameters(self, params):
         from rcl_interfaces.msg import SetParametersResult
 
-        from .params import BY_NAME, check
+        from .params import check
         try:
             for prm in params:
                 if prm.name in BY_NAME:       # else ROS's own (use_sim_time, qos_overrides.*)
@@ -1091,6 +1092,27 @@ def _declare(node, spec, value, descriptor):
             expected = f"one of {list(spec.choices)}" if spec.choices else "a valid value"
         raise FlexmbError(f"parameter '{spec.name}' (flag --{spec.name.replace('_', '-')} or -p "
                           f"{spec.name}:=...): expected {expected}; rclpy: {str(exc)[:160]}") from None
+
+
+def _refuse_unknown_overrides(node) -> None:
+    """A ``-p name:=value`` (or ``--params-file`` entry) for this node that names no parameter of
+    it is a :class:`FlexmbError`, not silently ignored as rclpy does for undeclared names: a typo
+    would otherwise run the twin on a default the user meant to change. ROS's own parameters
+    (``use_sim_time``, …, declared by rclpy before ours) and ``qos_overrides.*`` (declared with
+    the topics) are known."""
+    import difflib
+
+    declared = set(node._parameters)
+    unknown = sorted(name for name in node._parameter_overrides
+                     if name not in declared and not name.startswith("qos_overrides."))
+    if not unknown:
+        return
+    name = unknown[0]
+    close = difflib.get_close_matches(name, sorted(BY_NAME), n=3)
+    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+    more = f" (and {len(unknown) - 1} more unknown)" if len(unknown) > 1 else ""
+    raise FlexmbError(f"parameter {name[:60]!r} (-p {name[:60]}:=...): no parameter of the twin node has this "
+                      f"name{more}{hint} (`flexmb node --help` lists them)")
 
 
 def _iterations(samples: Samples) -> dict:
