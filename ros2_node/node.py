@@ -1004,6 +1004,11 @@ def _cpus(text: str) -> tuple[int, ...]:
                           f"got {text[:40]!r}") from None
     if any(c < 0 for c in cpus):
         raise FlexmbError(f"parameter 'cpu_affinity': CPU ids are ≥ 0, got {text[:40]!r}")
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    outside = [c for c in cpus if allowed and c not in allowed]
+    if outside:         # the OS would pin to the rest, or refuse: neither is what was asked
+        raise FlexmbError(f"parameter 'cpu_affinity': CPU {outside[0]} is not one this process may run on "
+                          f"(allowed: {allowed[:16]}{' …' if len(allowed) > 16 else ''}), got {text[:40]!r}")
     return cpus
 
 

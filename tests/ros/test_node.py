@@ -223,6 +223,7 @@ def test_realtime_node_owns_the_clock(tmp_path, dds_env):
                                                  "expected a value in [1, 10000]"),
     (["--clock-rate", "0"], "parameter 'clock_rate' (flag --clock-rate or -p clock_rate:=...): expected a value in [1, "),
     (["--ros-args", "-p", "dt:=abc"], "parameter 'dt' (flag --dt or -p dt:=...): expected a float; rclpy: "),
+    (["--cpu-affinity", "0,4096"], "parameter 'cpu_affinity': CPU 4096 is not one this process may run on (allowed: ["),
     (["--ros-args", "-p", "publish_rte:=50.0"], "parameter 'publish_rte' (-p publish_rte:=...): no parameter of the "
                                                 "twin node has this name; did you mean 'publish_rate'"),
 ])
