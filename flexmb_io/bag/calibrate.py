@@ -77,6 +77,9 @@ def _pose_topics(twin, setup: TwinSetup) -> dict[str, str]:
     return {T.pose_topic(o.name, i).resolved(setup.node_name, setup.namespace): o.name for i, o in enumerate(poses)}
 
 
+_UNTIL_SLACK_NS = 10_000_000
+
+
 def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = None, until: float | None = None,
                       scene_path: str | None = None, overrides: list[str] | None = None) -> Measurements:
     """The commands and measured channels of ``bag`` (up to ``until`` s of simulated time).
@@ -107,9 +110,12 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
         values.append(np.asarray(vals, dtype=float))
 
     have_act = act_topic in reader.topics()
+    end_ns, cut = 0, False
     for m in reader.messages():
         if stop is not None and m.log_time_ns > stop:
+            cut = True
             break
+        end_ns = max(end_ns, m.log_time_ns)
         if m.topic in kinds:
             commands.append((m.log_time_ns, m.topic, kinds[m.topic], obj_to_dict(m.decode()), m.arrival))
         elif m.topic == act_topic:
@@ -124,6 +130,11 @@ def read_measurements(bag, fit_keys: list[str], *, outputs: list[str] | None = N
             add(f"{poses[m.topic]}.position", m.log_time_ns, (p.position.x, p.position.y, p.position.z), "xyz")
             q = p.orientation
             add(f"{poses[m.topic]}.orientation", m.log_time_ns, (q.w, q.x, q.y, q.z), "xyz")
+    if stop is not None and not cut and stop > end_ns + _UNTIL_SLACK_NS:
+        # a horizon past the recording would fit nothing it names: say so instead of fitting less
+        # (within one 100 Hz output period of its last message it is the recording's end)
+        raise CalibrationError(f"--until {until:g} s is beyond the recording {bag}, which ends at "
+                               f"{end_ns * 1e-9:.6g} s of simulated time")
     if not commands:
         raise CalibrationError(f"{bag}: no recorded commands on {sorted(kinds)}: nothing drives the twin")
     channels = [Channel(name, np.asarray(t, dtype=np.int64), np.vstack(v), cols)

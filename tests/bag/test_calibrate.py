@@ -242,6 +242,7 @@ def test_bounds_default_to_a_decade_and_refuse_a_start_outside():
     (["--fit", "materials.steel.E", "--outputs", "torque"], "--outputs 'torque': no such measured channel"),
     (["--fit", "materials.steel.E", "--noise", "actuators.force=-1"], "expected CHANNEL=SIGMA with SIGMA > 0"),
     (["--fit", "materials.steel.E", "materials.steel.E"], "--fit names a key twice"),
+    (["--fit", "materials.steel.E", "--until", "5"], "--until 5 s is beyond the recording"),
 ])
 def test_bad_calibrate_flags_exit_1_with_the_reason(measured, args, message, capsys):
     assert main(["calibrate", str(measured), *args, "--quiet"]) == 1
