@@ -11,6 +11,17 @@ from ..errors import SceneError, excerpt, name_list
 _MISSING = object()
 
 
+def _did_you_mean(unknown: list, allowed: set[str]) -> str:
+    """`` (did you mean 'dt'?)`` for the first unknown key with a close allowed one (a typo), else ''."""
+    import difflib
+
+    for key in sorted(unknown, key=str):
+        close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+        if close:
+            return f" (did you mean {close[0]!r} for {str(key)[:40]!r}?)"
+    return ""
+
+
 class Node:
     """A position in the YAML tree: the value plus its dotted path for error messages."""
 
@@ -35,7 +46,8 @@ class Node:
             raise self.fail(f"expected a mapping, got {_typed(self.value)}")
         unknown = [k for k in self.value if k not in allowed]
         if unknown:
-            raise self.fail(f"unknown key(s) {name_list(sorted(unknown, key=str))}; allowed keys: {sorted(allowed)}")
+            raise self.fail(f"unknown key(s) {name_list(sorted(unknown, key=str))}{_did_you_mean(unknown, allowed)}; "
+                            f"allowed keys: {sorted(allowed)}")
         missing = sorted(k for k in required if k not in self.value)
         if missing:
             raise self.fail(f"missing required key(s) {missing}")

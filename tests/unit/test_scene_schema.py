@@ -30,7 +30,8 @@ def edit(fn):
 
 
 @pytest.mark.parametrize("mutate, expected", [
-    (lambda d: d["members"]["beam"].update(elemnts=3), "s.yaml:members.beam: unknown key(s) ['elemnts']"),
+    (lambda d: d["members"]["beam"].update(elemnts=3), "s.yaml:members.beam: unknown key(s) ['elemnts'] (did you mean "
+                                                       "'elements' for 'elemnts'?); allowed keys: "),
     (lambda d: d.update(gravity=[0, 0, -9.81]), "s.yaml:<root>: unknown key(s) ['gravity']"),
     (lambda d: d["members"]["beam"].update(to="nowhere"), "s.yaml:members.beam.to: unknown node 'nowhere'"),
     (lambda d: d["members"]["beam"].update(section="steel"), "s.yaml:members.beam.section: unknown section 'steel'"),
