@@ -111,9 +111,9 @@ def model_step(d, dlay, lam_new, rate_new, rate_given, f_ext, r, env, inv_diag, 
     the stretch history (:func:`begin_stretches`), which moves on when the step is accepted
     (:func:`accept_stretches`); a failed step leaves λ_n and its rate. Its ``tan`` in/out: the
     held tangent [held, coefficient, age, refreshes], and ``q_ref`` the unknowns it was formed at
-    (with ``P_COROT``, each shell's rotation since then rotates its solves); ``led`` in/out: the guard's ledger [il, ir,
-    t, K + U, candidate K + U] (advanced here when the step is accepted) with its rows ``gvec,
-    react``. The guard's energy balance (check 3) applies to steps that move no actuator. The GIL
+    (with ``P_COROT``, each shell's rotation since then rotates its solves); ``led`` in/out: the
+    guard's ledger [il, ir, t, K + U, candidate K + U] (advanced here when the step is accepted)
+    with its rows ``gvec, react``. The guard's energy balance (check 3) applies to steps that move no actuator. The GIL
     is released: a caller's other threads (the node's executor) run while the step does. Shared
     with the workspace and the integrator's LU: ``f_ext`` (loads at t_{n+1}, set by the caller),
     ``r`` (internal force of the last evaluation) and the skyline factors ``env, inv_diag,
