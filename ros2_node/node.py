@@ -109,9 +109,12 @@ class TwinNode:
     values : parameter values from the command line (the ``--ros-args -p`` overrides win)
     context : rclpy context (initialised by the caller)
     node_name : ROS node name (private topics live under it)
+    cli_params : names given by ``-p`` in the node's ``--ros-args`` (:func:`cli_param_names`):
+        one the node does not have is refused (a parameters file may address other nodes too)
     """
 
-    def __init__(self, values: dict, *, context, node_name: str = T.DEFAULT_NODE_NAME):
+    def __init__(self, values: dict, *, context, node_name: str = T.DEFAULT_NODE_NAME,
+                 cli_params: tuple[str, ...] = ()):
         import rclpy
         from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
@@ -138,7 +141,7 @@ class TwinNode:
             if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
                 value = float(value)
             effective[spec.name] = _declare(self.node, spec, value, desc)
-        _refuse_unknown_overrides(self.node)
+        _refuse_unknown_overrides(self.node, cli_params)
         self.p = NodeParams.from_values(effective)
         if self.p.mode == "lockstep" and self.p.command_source == "scene":
             raise FlexmbError("parameter 'mode': lockstep steps once per received command, so it needs "
@@ -1099,17 +1102,29 @@ def _declare(node, spec, value, descriptor):
                           f"{spec.name}:=...): expected {expected}; rclpy: {str(exc)[:160]}") from None
 
 
-def _refuse_unknown_overrides(node) -> None:
-    """A ``-p name:=value`` (or ``--params-file`` entry) for this node that names no parameter of
-    it is a :class:`FlexmbError`, not silently ignored as rclpy does for undeclared names: a typo
-    would otherwise run the twin on a default the user meant to change. ROS's own parameters
-    (``use_sim_time``, …, declared by rclpy before ours) and ``qos_overrides.*`` (declared with
-    the topics) are known."""
+def cli_param_names(ros_args: list[str] | None, node_name: str) -> tuple[str, ...]:
+    """The parameter names ``-p``/``--param`` items of ``ros_args`` give this node: ``name:=value``
+    and ``node_name:name:=value`` (another node's are not this node's)."""
+    args, names = list(ros_args or []), []
+    for flag, item in zip(args, args[1:]):
+        if flag not in ("-p", "--param") or ":=" not in item:
+            continue
+        target, _, name = item.split(":=", 1)[0].rpartition(":")
+        if target in ("", node_name):
+            names.append(name)
+    return tuple(names)
+
+
+def _refuse_unknown_overrides(node, names: tuple[str, ...]) -> None:
+    """A ``-p name:=value`` for this node that names no parameter of it is a
+    :class:`FlexmbError`, not silently ignored as rclpy does for undeclared names: a typo would
+    otherwise run the twin on a default the user meant to change. ROS's own parameters
+    (``use_sim_time``, …, declared by rclpy before ours) and ``qos_overrides.*`` (declared with the
+    topics) are known; a ``--params-file`` is not checked (one file often serves several nodes)."""
     import difflib
 
     declared = set(node._parameters)
-    unknown = sorted(name for name in node._parameter_overrides
-                     if name not in declared and not name.startswith("qos_overrides."))
+    unknown = sorted(name for name in set(names) if name not in declared and not name.startswith("qos_overrides."))
     if not unknown:
         return
     name = unknown[0]
@@ -1143,7 +1158,7 @@ def run_node(values: dict, *, node_name: str = T.DEFAULT_NODE_NAME, ros_args: li
         raise FlexmbError(f"--ros-args {excerpt(' '.join(ros_args or []))}: {str(exc).splitlines()[0][:200]}") from None
     node = None
     try:
-        node = TwinNode(values, context=context, node_name=node_name)
+        node = TwinNode(values, context=context, node_name=node_name, cli_params=cli_param_names(ros_args, node_name))
         # our own handlers: rclpy's do not reliably stop a loop that never blocks in the executor
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, node.request_stop)

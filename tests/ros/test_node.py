@@ -218,6 +218,15 @@ def test_realtime_node_owns_the_clock(tmp_path, dds_env):
     assert st.real_time_factor > 0 and st.converged
 
 
+def test_the_cli_parameter_names_of_this_node():
+    from ros2_node.node import cli_param_names
+
+    args = ["-r", "__ns:=/r1", "-p", "dt:=0.002", "--param", "flexmb_twin:mode:=lockstep", "-p", "other:x:=1",
+            "--params-file", "/tmp/p.yaml", "-p", "bad_item"]
+    assert cli_param_names(args, "flexmb_twin") == ("dt", "mode")
+    assert cli_param_names(None, "flexmb_twin") == ()
+
+
 @pytest.mark.parametrize("args, expected", [
     (["--ros-args", "-p", "publish_rate:=-5.0"], "parameter 'publish_rate' (flag --publish-rate or -p publish_rate:=...): "
                                                  "expected a value in [1, 10000]"),
@@ -226,6 +235,7 @@ def test_realtime_node_owns_the_clock(tmp_path, dds_env):
     (["--cpu-affinity", "0,4096"], "parameter 'cpu_affinity': CPU 4096 is not one this process may run on (allowed: ["),
     (["--ros-args", "-p", "publish_rte:=50.0"], "parameter 'publish_rte' (-p publish_rte:=...): no parameter of the "
                                                 "twin node has this name; did you mean 'publish_rate'"),
+    (["--ros-args", "-p", "flexmb_twin:publish_rte:=50.0"], "parameter 'publish_rte' (-p publish_rte:=...): "),
 ])
 def test_bad_parameter_fails_with_a_clear_message(dds_env, args, expected):
     p = subprocess.run([sys.executable, "-m", "flexmb.cli", "node", SCENE] + args,
