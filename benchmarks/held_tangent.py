@@ -1,7 +1,9 @@
 """The held tangent of modified Newton, fixed or following the shells' rotation (``solver.held_tangent``),
 on the dynamic shell scenes: Newton iterations and factorizations per step, µs per step, and how far
 each run's states are from the root (a full-Newton run at ``--root-tolerance``), all in one process,
-the two variants interleaved block by block. Writes docs/benchmarks/held_tangent.{md,json}.
+the two variants interleaved block by block; then each scene's whole run with each variant (its
+iterations, factorizations, sub-steps, refusals, failures, wall time). Writes
+docs/benchmarks/held_tangent.{md,json}.
 
     .venv/bin/python benchmarks/held_tangent.py [--steps 2000] [--blocks 5] [--out docs/benchmarks]
 """
@@ -74,6 +76,18 @@ def measure(name: str, steps: int, blocks: int, root_tolerance: float, every: in
     return out
 
 
+def whole_run(name: str, variant: str) -> dict:
+    """The scene's whole run (``Simulator.run`` to its ``until``) with one variant: its statistics."""
+    sim = _sim(name, held_tangent=variant)
+    t0 = time.perf_counter()
+    sim.run(sim.spec.until)
+    wall = time.perf_counter() - t0
+    s = sim.stats
+    return {"steps": s.steps, "iterations_per_step": s.iterations_total / s.steps, "iterations_max": s.iterations_max,
+            "substepped": s.substepped_steps, "refused": s.guard_rejected_steps, "unconverged": s.unconverged_steps,
+            "factorizations": int(sim._dynamic.tangent_updates), "wall_s": wall}
+
+
 def _render(meta: dict, rows: list[dict]) -> str:
     lines = ["# The held tangent: fixed or following the shells' rotation (`benchmarks/held_tangent.py`)", "",
              f"{meta['date']}, {meta['platform']}, {meta['cpus']} cores. Each scene at its own tolerance, "
@@ -90,6 +104,15 @@ def _render(meta: dict, rows: list[dict]) -> str:
                          f"{x['factorizations']} | {x['us_per_step']:.0f} | {x['root_distance_max_m']:.1e} / "
                          f"{x['root_distance_median_m']:.1e} |")
         lines.append(f"| | | fixed / corotated | | | {r['fixed']['us_per_step'] / r['corotated']['us_per_step']:.2f}× | |")
+    lines += ["", "Whole runs (`Simulator.run` to the scene's `until`, steps batched as `flexmb run` batches them):", "",
+              "| scene | held tangent | steps | Newton iterations / step (most) | factorizations | sub-stepped | "
+              "refused | unconverged | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for v in VARIANTS:
+            w = r["whole"][v]
+            lines.append(f"| {r['scene']} | {v} | {w['steps']} | {w['iterations_per_step']:.3f} ({w['iterations_max']}) | "
+                         f"{w['factorizations']} | {w['substepped']} | {w['refused']} | {w['unconverged']} | "
+                         f"{w['wall_s']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -105,6 +128,7 @@ def main() -> int:
     for name in args.scenes:
         rows.append(measure(name, args.steps or SCENES[name], args.blocks, args.root_tolerance))
         r = rows[-1]
+        r["whole"] = {v: whole_run(name, v) for v in VARIANTS}
         print(name, {v: {k: r[v][k] for k in ("iterations_per_step", "factorizations", "us_per_step",
                                                   "root_distance_max_m")} for v in VARIANTS}, flush=True)
     meta = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "platform": platform.platform(), "cpus": os.cpu_count(),

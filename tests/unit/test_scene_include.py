@@ -73,7 +73,7 @@ def test_includes_compose_in_order_and_nest_relative_to_each_file(tmp_path):
     ({"base.yaml": BASE, "a.yaml": "include: {file: base.yaml, overrides: {materials.copper.E: 1.0}}\n"},
      "a.yaml", "a.yaml:include.overrides.materials.copper.E", "the scene has no key 'materials.copper'"),
     ({"base.yaml": BASE, "a.yaml": "include: {file: base.yaml, override: {}}\n"}, "a.yaml", "a.yaml:include",
-     "unknown key(s) ['override']; allowed keys: ['file', 'overrides']"),
+     "unknown key(s) ['override'] (did you mean 'overrides' for 'override'?); allowed keys: ['file', 'overrides']"),
 ])
 def test_bad_includes_are_refused_with_the_key_and_the_reason(tmp_path, files, top, where, text):
     for name, body in files.items():

@@ -144,8 +144,9 @@ def test_servo_smooths_a_100_hz_staircase():
 
 
 @pytest.mark.parametrize("extra,message", [
-    ({"bandwith_hz": 3.0}, "stewart_servo.yaml:members.leg1.actuator.servo: unknown key(s) ['bandwith_hz']; "
-                           "allowed keys: ['bandwidth_hz', 'damping_ratio', 'max_accel', 'max_rate']"),
+    ({"bandwith_hz": 3.0}, "stewart_servo.yaml:members.leg1.actuator.servo: unknown key(s) ['bandwith_hz'] (did you "
+                           "mean 'bandwidth_hz' for 'bandwith_hz'?); allowed keys: ['bandwidth_hz', 'damping_ratio', "
+                           "'max_accel', 'max_rate']"),
     ({"max_rate": -1.0}, "stewart_servo.yaml:members.leg1.actuator.servo.max_rate: expected a positive number "
                          "(m/s), got -1.0"),
     ({"damping_ratio": float("nan")}, "stewart_servo.yaml:members.leg1.actuator.servo.damping_ratio: expected a "
