@@ -100,3 +100,20 @@ def test_copies_own_no_factors(stewart_bars):
     data.tan[T_COUNT] = 7.0
     copy.assign(data)
     assert copy.tan[T_COUNT] == 7.0
+
+
+def test_a_rollback_of_the_shell_twin_repeats_its_corotated_steps_bit_for_bit():
+    """With shells the held tangent's solves turn by each shell's rotation since ``q_ref``, the
+    state it was formed at: ``q_ref`` is in the data, so a rollback (here across 50 steps that
+    reuse one tangent) repeats them exactly, and a wrong ``q_ref`` would not."""
+    sim = _started(compile_scene(load_scene(SCENES / "stewart_platform_shell.yaml")), 620)
+    saved = sim.data.copy()
+    count = sim.data.tan[T_COUNT]
+    first = _run(sim, 50)
+    assert sim.data.tan[T_COUNT] == count and saved.q_ref.size == sim.state.q.size
+    sim.data.assign(saved)
+    assert sim.data.tan[T_HELD] == 1.0
+    assert np.array_equal(first, _run(sim, 50))
+    sim.data.assign(saved)
+    sim.data.q_ref[:] = sim.state.q              # as if formed now: other rotations, other steps
+    assert not np.array_equal(first, _run(sim, 50))
