@@ -112,6 +112,14 @@ def name_list(names, limit: int = NAME_LIST_ITEMS) -> str:
     return f"[{shown}, … and {thousands(rest)} more]" if rest > 0 else f"[{shown}]"
 
 
+def near_names(name, known, n: int = 1) -> list[str]:
+    """Up to ``n`` of ``known`` close to ``name`` (a typo's likely intent, by difflib's ratio;
+    ``name`` cut to 100 characters so a huge one costs nothing), best first."""
+    import difflib
+
+    return difflib.get_close_matches(str(name)[:100], sorted(known), n=n)
+
+
 # -- output paths, checked before the work that writes them -------------------------------------
 
 def _path_text(path: Path) -> str:

@@ -41,7 +41,7 @@ import threading
 import time
 from pathlib import Path
 
-from flexmb_core.errors import FlexmbError, excerpt, writable_file
+from flexmb_core.errors import FlexmbError, excerpt, near_names, writable_file
 from flexmb_core.model.compile import compile_scene
 from flexmb_core.model.workspace import Workspace
 from flexmb_core.report import TwinReporter
@@ -1121,14 +1121,12 @@ def _refuse_unknown_overrides(node, names: tuple[str, ...]) -> None:
     otherwise run the twin on a default the user meant to change. ROS's own parameters
     (``use_sim_time``, …, declared by rclpy before ours) and ``qos_overrides.*`` (declared with the
     topics) are known; a ``--params-file`` is not checked (one file often serves several nodes)."""
-    import difflib
-
-    declared = set(node._parameters)
-    unknown = sorted(name for name in set(names) if name not in declared and not name.startswith("qos_overrides."))
+    unknown = sorted(name for name in set(names)
+                     if not node.has_parameter(name) and not name.startswith("qos_overrides."))
     if not unknown:
         return
     name = unknown[0]
-    close = difflib.get_close_matches(name, sorted(BY_NAME), n=3)
+    close = near_names(name, BY_NAME, n=3)
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     more = f" (and {len(unknown) - 1} more unknown)" if len(unknown) > 1 else ""
     raise FlexmbError(f"parameter {name[:60]!r} (-p {name[:60]}:=...): no parameter of the twin node has this "

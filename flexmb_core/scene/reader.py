@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..errors import SceneError, excerpt, name_list
+from ..errors import SceneError, excerpt, name_list, near_names
 
 _MISSING = object()
 _HINTED_KEYS = 8             # unknown keys looked at for a near allowed one
@@ -14,10 +14,8 @@ _HINTED_KEYS = 8             # unknown keys looked at for a near allowed one
 
 def _did_you_mean(unknown: list, allowed: set[str]) -> str:
     """`` (did you mean 'dt'?)`` for the first unknown key with a close allowed one (a typo), else ''."""
-    import difflib
-
     for key in sorted(unknown, key=str)[:_HINTED_KEYS]:       # bounded: a file may hold 10⁵ stray keys
-        close = difflib.get_close_matches(str(key)[:100], sorted(allowed), n=1)
+        close = near_names(key, allowed)
         if close:
             return f" (did you mean {close[0]!r} for {str(key)[:40]!r}?)"
     return ""
