@@ -1,20 +1,11 @@
 """flexmb — flexible digital twin of actuated spatial mechanisms (positional FEM).
 
-Verbs:
-  flexmb check SCENE [--max-elements N] [--max-dofs N]
-                                          validate a scene and print the model summary; size
-                                          limits (also --max-yaml-nodes, --max-file-bytes) are
-                                          checked before any per-element work
-  flexmb run SCENE --until T [--dt DT] [--json OUT]
-                                          offline simulation; JSON summary of speed, solver
-                                          health and the final values of the scene's outputs
-  flexmb commands stewart --out CSV       the Stewart appendix leg-length commands (Eqs. 52–60)
-  flexmb tune SCENE --tol TOL [--until T] [--out DIR] [--scheduler ADDRESS] [--workers N]
-                                          cheapest fidelity whose outputs stay within TOL of a
-                                          converged reference; writes the tuned scene and its table;
-                                          each round's candidates run on Dask
+Every verb below has its own --help (flexmb VERB --help); the README's command table shows them
+all with their flags.
 
-Exit codes: 0 success, 1 bad input (scene, flags), 2 a step did not converge.
+Exit codes: 0 success, 1 bad input (scene, flags), 2 a step did not converge, 3 a result short of
+what was asked (replay, replay-live: an output beyond tolerance; calibrate: the fit did not converge;
+tune: no candidate within tolerance; sweep: some runs failed), 130 interrupted (SIGINT/SIGTERM).
 """
 
 from __future__ import annotations

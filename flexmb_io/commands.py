@@ -10,7 +10,7 @@ Three input forms, one per topic of the node (see :mod:`flexmb_io.topics`):
   which counts from the trajectory's end.
 
 A command stream is a sampled signal, not a staircase (``hold='ramp'``, the default). A new
-length is reached over one *observed command period* T — the median of the last intervals
+length is reached over one *observed command period* T — the mean of the last intervals
 between commands on the same input, measured on the stamps when stamped and on arrival otherwise
 (a live node's reception on the wall clock, mapped onto the twin's time; offline, the twin's time
 at acceptance), bounded to [Δt, min(0.5 s, timeout)], Δt for the first
@@ -53,7 +53,7 @@ STALL_GRACE = 0.03           # s: a bare-length stream's line is followed this l
 # s over which a moving command stops when its timeout starts (a frozen line is a velocity step:
 # measured 3–4 kN leg force peaks on the Stewart twin at the end of a 0.3 m/s stream)
 TIMEOUT_STOP = 0.1
-_PERIOD_WINDOW = 8           # intervals in the median of the observed command period
+_PERIOD_WINDOW = 8           # intervals in the mean of the observed command period
 # most samples of a bare stream taken as lost between two arrivals (a later arrival is a stall);
 # 16: a keep-last history of 10 overwritten while the executor stalled lost 9 and 15 in a row of a
 # 1 kHz stream in live runs

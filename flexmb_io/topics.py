@@ -58,7 +58,7 @@ ACTUATOR_STATES = Topic("~/actuator_states", "flexmb_msgs/msg/ActuatorState", "o
 PLATFORM_POSE = Topic("~/platform_pose", "geometry_msgs/msg/PoseStamped", "out",
                       "centroid and orientation of the scene's first platform_pose output")
 SHAPE = Topic("~/shape", "visualization_msgs/msg/MarkerArray", "out",
-              "deformed members as LINE_STRIP markers (node positions, m)")
+              "deformed members as LINE_STRIP markers, shells as TRIANGLE_LIST (node positions, m)")
 STATUS = Topic("~/status", "flexmb_msgs/msg/TwinStatus", "out",
                "solver health of the last step, timing, deadline misses, rejected commands")
 CLOCK = Topic("/clock", "rosgraph_msgs/msg/Clock", "out", "simulated time, when the node owns time")

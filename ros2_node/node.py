@@ -1130,7 +1130,7 @@ def _refuse_unknown_overrides(node, names: tuple[str, ...]) -> None:
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     more = f" (and {len(unknown) - 1} more unknown)" if len(unknown) > 1 else ""
     raise FlexmbError(f"parameter {name[:60]!r} (-p {name[:60]}:=...): no parameter of the twin node has this "
-                      f"name{more}{hint} (`flexmb node --help` lists them)")
+                      f"name{more}{hint} (`flexmb node --help` lists them all)")
 
 
 def _iterations(samples: Samples) -> dict:

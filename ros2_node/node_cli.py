@@ -19,6 +19,8 @@ from pathlib import Path
 from flexmb_core.errors import FlexmbError, excerpt, writable_dir
 from flexmb_io import topics as T
 
+from .params import SPECS
+
 # flag → parameter name (None: same name with '-' → '_')
 _NODE_FLAGS = ("mode", "dt", "integrator", "publish-rate", "shape-rate", "command-source", "command-timeout",
                "command-timeout-behaviour", "duration", "idle-timeout", "qos-depth", "record", "rrd", "summary-json",
@@ -238,7 +240,9 @@ def register(verbs, run_parser) -> None:
     n = verbs.add_parser("node", help="run the twin as a ROS 2 node (rclpy, DDS on localhost)",
                          description="The flexmb twin node (a managed lifecycle node, active at start unless "
                                      "--lifecycle). Parameters can also be set with --ros-args -p name:=value "
-                                     "(they win over the flags); --ros-args -r __ns:=/robot1 namespaces it.")
+                                     "(they win over the flags); --ros-args -r __ns:=/robot1 namespaces it.",
+                         epilog="parameters (--ros-args -p NAME:=VALUE; README \"The ROS 2 twin node\" and "
+                                "`ros2 param describe` explain each): " + ", ".join(s.name for s in SPECS))
     n.add_argument("scene")
     n.add_argument("--name", default=T.DEFAULT_NODE_NAME, help="node name (private topics live under it)")
     n.add_argument("--mode", choices=("realtime", "lockstep"))

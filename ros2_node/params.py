@@ -32,7 +32,8 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("integrator", "", "override solver.integrator: newmark | generalized_alpha | chung_hulbert "
               "('' = the scene's)", choices=("", "newmark", "generalized_alpha", "chung_hulbert")),
     ParamSpec("publish_rate", 100.0, "rate (Hz of simulated time) of /joint_states, actuator states, pose, "
-              "status, /clock (joint states and status also follow every new command: publish_on_command)",
+              "status (joint states and status also follow every new command: publish_on_command; /clock: "
+              "clock_rate)",
               low=1.0, high=10000.0, read_only=False),
     ParamSpec("shape_rate", 30.0, "rate (Hz) of ~/shape (member polylines, shell triangles); 0 disables", low=0.0,
               high=1000.0, read_only=False),

@@ -237,7 +237,7 @@ def run(case: str = "ancf4", dt: float = 1e-3, until: float = 20.0, repeats: int
     steps = int(round(until / dt))
     wall = statistics.median(walls)
     ks = sorted(out["marks"])
-    from flexmb_core.observers import quaternion_wxyz
+    from scipy.spatial.transform import Rotation
     how = "commands from Python every step" if commands else "no command update (legs held, no motion)"
     return {"label": f"Exudyn {exu.config.Version()}, ANCF cable legs ({n} el./leg), rigid platform, Δt = {dt * 1e3:g} ms, "
                      + how, "commands": commands,
@@ -248,7 +248,8 @@ def run(case: str = "ancf4", dt: float = 1e-3, until: float = 20.0, repeats: int
             "newton_iterations_mean": out["newton"] / steps, "jacobians": out["jacobians"],
             "compare_with": COMPARE.get((case, dt)) if commands else None,
             "_marks": np.array(ks), "_pos": np.array([out["marks"][k][0] for k in ks]),
-            "_quat": np.array([quaternion_wxyz(out["marks"][k][1]) for k in ks])}
+            "_quat": (Rotation.from_matrix([out["marks"][k][1] for k in ks]).as_quat(canonical=True, scalar_first=True)
+                      if ks else np.empty((0, 4)))}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -6,9 +6,11 @@
    Dask cluster — an in-process ``LocalCluster`` (worker processes, one thread each, on 127.0.0.1)
    or the scheduler at ``--scheduler ADDRESS`` — and stores each row as it arrives. A worker that
    dies mid-run loses nothing: the scheduler reschedules its task on another worker (up to
-   ``distributed.scheduler.allowed-failures`` deaths); ``retries`` re-runs a task that raised.
-   A run that fails is a row with its error; a run the cluster could not complete (``error_kind:
-   lost``) is a row too, but is not stored, so the next sweep tries it again.
+   ``distributed.scheduler.allowed-failures`` deaths); ``retries`` re-runs a task that raised
+   outside its run (:func:`~.runs.run_one` turns a run's own errors into rows). A run that fails is
+   a row with its error, stored; a run the cluster could not complete (``error_kind: lost``) or that
+   met an unforeseen error (``error_kind: unexpected``, a bug) is a row too, but is not stored, so
+   the next sweep tries it again.
 3. :func:`write_results` writes ``sweep.csv``, ``sweep.parquet`` (with pyarrow), ``sweep.png``
    (with matplotlib) and ``sweep.json`` (the settings and counts of the sweep).
 

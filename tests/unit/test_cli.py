@@ -252,3 +252,34 @@ def test_viewing_and_playing_flags_are_checked_up_front(tmp_path):
              f"flexmb play: {table}: data row 2 of the table holds a value that is not a finite number", cli=FULL_CLI)
     _refused(["play", "--csv", str(table), "--names", "a,a"],
              "flexmb play: --names 'a,a': expected distinct, non-empty actuator names", cli=FULL_CLI)
+
+
+def _verbs():
+    import argparse
+
+    from flexmb.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices
+
+
+def _long_flags(parser) -> list[str]:
+    """Every ``--flag`` of a verb, its sub-verbs' included (``bag info --json``)."""
+    import argparse
+
+    flags = [o for a in parser._actions for o in a.option_strings if o.startswith("--") and o != "--help"]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            flags += [f for p in action.choices.values() for f in _long_flags(p)]
+    return flags
+
+
+@pytest.mark.parametrize("verb", sorted(_verbs()))
+def test_every_flag_of_a_verb_is_in_its_readme_row(verb):
+    """The README's command table is the CLI's contract (a tried-as-a-user check reads it): each
+    verb has a row ``| `flexmb VERB …` |`` and every flag the verb accepts is written in one."""
+    rows = [ln for ln in (ROOT / "README.md").read_text().splitlines()
+            if ln.startswith((f"| `flexmb {verb} ", f"| `flexmb {verb}`"))]
+    assert rows, f"no README row for flexmb {verb}"
+    missing = [f for f in _long_flags(_verbs()[verb]) if f not in "\n".join(rows)]
+    assert not missing, f"flexmb {verb}: flags missing from its README row: {missing}"

@@ -214,15 +214,6 @@ def test_a_failing_run_is_a_row_with_its_error(client, tmp_path):
     assert len(list((tmp_path / "runs").glob("*.json"))) == 4     # deterministic failures are stored too
 
 
-def test_every_sweep_flag_is_in_the_readme_contract():
-    from flexmb_core.cli import build_parser
-
-    row = [ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("| `flexmb sweep SCENE")]
-    assert len(row) == 1
-    flags = [o for a in build_parser().verb_parsers["sweep"]._actions for o in a.option_strings if o.startswith("--")]
-    assert set(flags) - {"--help"} and all(f in row[0] for f in flags if f != "--help")
-
-
 def test_bad_worker_count_exits_1(capsys):
     from flexmb_core.cli import main
 
