@@ -9,22 +9,26 @@ Three input forms, one per topic of the node (see :mod:`flexmb_io.topics`):
   rate) in force when it arrives and holds its last point until a new command or the timeout,
   which counts from the trajectory's end.
 
-A command stream is a sampled signal, not a staircase (``hold='ramp'``, the default). A new
-length is reached over one *observed command period* T — the mean of the last intervals
-between commands on the same input, measured on the stamps when stamped and on arrival otherwise
-(a live node's reception on the wall clock, mapped onto the twin's time; offline, the twin's time
-at acceptance), bounded to [Δt, min(0.5 s, timeout)], Δt for the first
-command:
+A command stream is a sampled signal, not a staircase. A new length is reached over one
+*observed command period* T — the mean of the last intervals between commands on the same input
+that are not pauses, measured on the stamps when stamped and on arrival otherwise (a live node's
+reception on the wall clock, mapped onto the twin's time; offline, the twin's time at
+acceptance), bounded to [Δt, min(0.5 s, timeout)], Δt for the first command. Three holds
+(``hold``):
 
-- lengths without rates: a first-order hold, the linear ramp from the length in force at
-  acceptance t_a to the new length over [t_a, t_a + T] (continuous in length; at 100 Hz the twin
-  follows the samples one period late, as any causal interpolation must);
-- lengths with rates: the commanded line ``L + v (t − stamp)``, reached by the cubic Hermite
-  from the (length, rate) in force at t_a to the line's (length, rate) at t_a + T (continuous in
-  length and rate), followed afterwards.
+- ``'smooth'`` (the default): a cubic Hermite from the (length, rate) in force at acceptance t_a
+  to the commanded line's (length, rate) at t_a + T', continuous in length and rate (T' = T plus
+  four times the spread of the intervals: a jittery stream's corrections spread out); the line is
+  ``L + v (t − stamp)`` when the command has rates, else the parabola through the last three
+  samples (exact for constant acceleration), followed one period past its segment and then faded
+  to rest (a stream that stops);
+- ``'ramp'``: lengths without rates by a first-order hold, the linear ramp from the length in force
+  at t_a to the new length over [t_a, t_a + T] (continuous in length; at 100 Hz the twin follows
+  the samples one period late, as any causal interpolation must); lengths with rates as in
+  ``'smooth'``;
+- ``'step'``: each length applies from the next step (the staircase of earlier versions).
 
-When one command arrives per time step (T = Δt) both are exactly the old zero-order hold.
-``hold='step'`` keeps that old behaviour for any stream: each length applies from the next step.
+When one command arrives per time step (T = Δt) the holds reach each length at the next step.
 
 A message is accepted whole or rejected whole, with a :class:`Rejection` that names the topic,
 a bounded excerpt of the offending value and what was expected. Commands that address only some
@@ -479,7 +483,8 @@ class CommandSchedule:
     ramp_time : s, duration of the smooth ramp to ``rest``
     stale_after : s, stamped commands older than ``now − stale_after`` are rejected
     max_lead : s, stamped commands later than ``now + max_lead`` are rejected (clock mismatch)
-    hold : ``ramp`` (first-order / Hermite hold over the observed command period) or ``step``
+    hold : ``smooth`` (cubic Hermite over the observed command period), ``ramp`` (first-order hold
+        of bare lengths) or ``step`` (the module's docstring)
     dt : s, the twin's time step: the shortest hold and the first command's period
     max_rate : m/s, scalar or (na,): commanded rates beyond it are rejected (the servo's
         ``max_rate`` where one is declared, ``max_command_rate`` otherwise)
