@@ -18,9 +18,10 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
-from .errors import ConvergenceError, FlexmbError, SceneError, thousands, writable_dir, writable_file
+from .errors import ConvergenceError, FlexmbError, SceneError, path_excerpt, thousands, writable_dir, writable_file
 
 
 def _env_defaults() -> None:
@@ -35,7 +36,6 @@ def _env_defaults() -> None:
 _STRAY = (ValueError, TypeError, KeyError, IndexError, ArithmeticError, RecursionError, MemoryError,
           UnicodeError)
 MESSAGE_CHARS = 1500          # an error message printed by main is at most this long
-MAX_SWEEP_RUNS = 1_000_000   # --samples at most: each sample is a whole run (a table row, a file each)
 MAX_TABLE_ROWS = 10_000_000  # rows of `commands` at most (0.7 GB of CSV; 20 s at 2 µs)
 
 
@@ -178,7 +178,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     overrides = {"dt": args.dt, "until": args.until, "integrator": args.integrator}
     if args.json:
-        writable_file(args.json, "--json")      # before the run: no work lost to a bad path
+        writable_file(args.json, "--json", inputs=(args.scene,))   # before the run: no work lost to a bad path
     scene, model = _load(args.scene, overrides, _limits(args))
     spec = scene.solver
     sim = Simulator(model)
@@ -187,15 +187,19 @@ def cmd_run(args: argparse.Namespace) -> int:
         from .integrators.path_following import PathFollower
         path = PathFollower(sim)              # SceneError (exit 1) for loads it cannot scale
     warm = sim.warmup()
+    error = ""
     if path is None:
-        sim.initialize()
+        try:
+            sim.initialize()
+        except ConvergenceError as exc:     # the initial static equilibrium: exit 2 and the JSON, as a step
+            error = str(exc)
     until = spec.until
     progress = _Progress(until if path is None else spec.max_steps, not args.quiet)
     tracker = PoseTracker(model)
 
     # Adapters (MCAP recorder, rerun logger) attach here: hooks with start(sim), step(sim, res)
     # and close(sim, summary). The core never imports them.
-    hooks = [h(args, scene, model) for h in getattr(args, "hook_factories", ())]
+    hooks = [h(args, scene, model) for h in getattr(args, "hook_factories", ())] if not error else []
     hooks = [h for h in hooks if h is not None]
 
     stop = _StopOnSignal()
@@ -207,14 +211,15 @@ def cmd_run(args: argparse.Namespace) -> int:
             h.step(s, res)
         stop.check()
 
-    error = ""
     with stop:        # until every hook has closed its recording
         try:
             if path is not None:
                 path.initialize()
             for h in hooks:
                 h.start(sim)
-            if path is None:
+            if error:
+                pass                          # no state to start from: nothing to run or record
+            elif path is None:
                 sim.run(until, callback=on_step)
             else:
                 path.run(callback=on_step)
@@ -237,14 +242,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         for h in hooks:
             h.close(sim, summary)
     text = json.dumps(summary, indent=2, allow_nan=True)
+    unwritten = ""
     if args.json:
-        Path(args.json).write_text(text + "\n")
-    if not args.quiet:
+        try:
+            Path(args.json).write_text(text + "\n")
+        except OSError as exc:        # a full disk: the summary is printed instead, not lost
+            unwritten = f"--json {path_excerpt(Path(args.json))}: cannot write the summary ({exc.strerror or exc})"
+    if not args.quiet or unwritten:
         _print_run(scene, summary, warm, tracker)
+    if unwritten:
+        print(_bounded(f"flexmb run: {unwritten}"), file=sys.stderr)
     if error:
         print(f"flexmb run: {error}", file=sys.stderr)
         return 130 if error.startswith("interrupted") else 2
-    return 0
+    return 1 if unwritten else 0
 
 
 def _run_keys(spec, sim, path, error: str) -> dict:
@@ -312,10 +323,12 @@ def cmd_commands(args: argparse.Namespace) -> int:
 
     from .mechanisms import stewart
 
-    n = int(round(args.until / args.dt)) + 1
-    if n > MAX_TABLE_ROWS:
-        raise FlexmbError(f"--dt {args.dt:g}: {thousands(n)} rows over --until {args.until:g} s; at most "
+    steps = args.until / args.dt            # inf for --until 1e308: checked before any int()
+    if not steps + 1 <= MAX_TABLE_ROWS:
+        rows = thousands(int(round(steps)) + 1) if steps < 1e15 else f"{steps:.3g}"
+        raise FlexmbError(f"--dt {args.dt:g}: {rows} rows over --until {args.until:g} s; at most "
                           f"{thousands(MAX_TABLE_ROWS)} (--dt ≥ {args.until / (MAX_TABLE_ROWS - 1):.3g} s)")
+    n = int(round(steps)) + 1
     t = np.linspace(0.0, args.until, n)
     try:
         lengths, rates = stewart.appendix_leg_lengths(t, start=args.start, blend_time=args.blend_time,
@@ -404,13 +417,14 @@ def _tune_where(args: argparse.Namespace, search):
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from .study.design import MAX_RUNS
     from .study.progress import ProgressBar
     from .study.sweep import DEFAULT_OUT, sweep
 
     params = [x for group in (args.param or []) for x in group]
     outputs = [x for x in (args.outputs or "").split(",") if x] or None
-    if args.samples is not None and not 1 <= args.samples <= MAX_SWEEP_RUNS:
-        raise FlexmbError(f"--samples: expected 1 to {MAX_SWEEP_RUNS} runs, got {args.samples}")
+    if args.samples is not None and not 1 <= args.samples <= MAX_RUNS:
+        raise FlexmbError(f"--samples: expected 1 to {MAX_RUNS} runs, got {args.samples}")
     if args.seed < 0:
         raise FlexmbError(f"--seed: expected a non-negative integer, got {args.seed}")
     writable_dir(args.out or DEFAULT_OUT, "--out")
@@ -554,8 +568,16 @@ def add_run_hook(run_parser: argparse.ArgumentParser, factory) -> None:
     run_parser.get_default("hook_factories").append(factory)
 
 
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    """A warning as a user of the command reads it: what, in one line — not the source line that
+    raised it (Python's default format quotes our code or NumPy's)."""
+    return _bounded(f"flexmb: {category.__name__}: {message}") + "\n"
+
+
 def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
     _env_defaults()
+    if not os.environ.get("FLEXMB_DEBUG"):
+        warnings.formatwarning = _one_line_warning
     args = (parser or build_parser()).parse_args(argv)
     for name in ("until", "dt"):
         v = getattr(args, name, None)
@@ -569,6 +591,12 @@ def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None =
         return 1
     except FlexmbError as exc:
         print(_bounded(f"flexmb {args.verb}: {exc}"), file=sys.stderr)
+        return 1
+    except OSError as exc:
+        # an I/O failure on a path the user gave, after its checks passed (a full disk, a directory
+        # removed meanwhile): what failed where, no traceback
+        where = f"{path_excerpt(Path(os.fsdecode(exc.filename)))}: " if exc.filename else ""
+        print(_bounded(f"flexmb {args.verb}: {where}{exc.strerror or exc}"), file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         # a verb that does not stop on its own after a signal (or a second signal, _StopOnSignal):

@@ -122,25 +122,30 @@ def near_names(name, known, n: int = 1) -> list[str]:
 
 # -- output paths, checked before the work that writes them -------------------------------------
 
-def _path_text(path: Path) -> str:
+def path_excerpt(path: Path) -> str:
+    """A path as an error message quotes it: at most ``EXCERPT_CHARS`` characters."""
     text = str(path)
     return text if len(text) <= EXCERPT_CHARS else text[:EXCERPT_CHARS - 1] + "…"
 
 
-def writable_file(path, flag: str) -> Path:
+def writable_file(path, flag: str, inputs=()) -> Path:
     """``path`` (a file a command will write, e.g. ``--json``) once a file can be written there —
     its directory created, an existing file left as it is — or :class:`FlexmbError` naming
-    ``flag``. Called before the run, so that no work is lost to a bad output path."""
+    ``flag``; also when it is one of the command's ``inputs`` (paths it reads: a scene, a bag),
+    which writing would destroy. Called before the run, so that no work is lost to a bad output path."""
     p = Path(path)
-    if p.is_dir():
-        raise FlexmbError(f"{flag} {_path_text(p)}: is a directory (expected the path of a file to write)")
-    existed = p.exists()
     try:
+        if p.is_dir():
+            raise FlexmbError(f"{flag} {path_excerpt(p)}: is a directory (expected the path of a file to write)")
+        existed = p.exists()
+        if existed and any(Path(i).exists() and p.samefile(i) for i in inputs):
+            raise FlexmbError(f"{flag} {path_excerpt(p)}: is an input of this command; expected another path "
+                              "(writing there would overwrite it)")
         p.parent.mkdir(parents=True, exist_ok=True)
         with open(p, "a"):
             pass
-    except OSError as exc:
-        raise FlexmbError(f"{flag} {_path_text(p)}: cannot write there ({exc.strerror or exc})") from None
+    except OSError as exc:          # also from is_dir()/exists(): a name too long, a loop of links
+        raise FlexmbError(f"{flag} {path_excerpt(p)}: cannot write there ({exc.strerror or exc})") from None
     if not existed:
         p.unlink()
     return p
@@ -150,13 +155,13 @@ def writable_dir(path, flag: str) -> Path:
     """``path`` (a directory a command will write into, e.g. ``--out``), created if missing, or
     :class:`FlexmbError` naming ``flag``."""
     p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise FlexmbError(f"{flag} {_path_text(p)}: exists and is not a directory")
     try:
+        if p.exists() and not p.is_dir():
+            raise FlexmbError(f"{flag} {path_excerpt(p)}: exists and is not a directory")
         p.mkdir(parents=True, exist_ok=True)
         probe = p / f".flexmb-write-probe-{os.getpid()}"
         probe.touch()
         probe.unlink()
-    except OSError as exc:
-        raise FlexmbError(f"{flag} {_path_text(p)}: cannot write there ({exc.strerror or exc})") from None
+    except OSError as exc:          # also from exists(): a name too long, a loop of links
+        raise FlexmbError(f"{flag} {path_excerpt(p)}: cannot write there ({exc.strerror or exc})") from None
     return p

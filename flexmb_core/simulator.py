@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import ConvergenceError, FlexmbError
+from .errors import ConvergenceError, FlexmbError, SceneError
 from .integrators.dynamic import DynamicIntegrator
 from .integrators.fast import TABLE_STEPS
 from .integrators.static import StaticSolver
@@ -134,6 +134,8 @@ class Simulator:
         twin does not begin by dropping its own weight.
         """
         lengths = self.command_lengths(self.state.t)
+        if self._override is None:
+            self._check_scene_lengths(lengths, self.state.t)
         self.last_commands[:] = lengths
         servo = self.model.actuators.servo
         if servo is not None:             # servos start at rest on their commanded lengths
@@ -151,6 +153,18 @@ class Simulator:
         else:
             self.last = self._static.solve_at(self.state, self.state.t, self.state.lam)
         return self.last
+
+    def _check_scene_lengths(self, lengths: np.ndarray, t: float) -> None:
+        """A scene whose commands give an actuator no positive finite length at the start is bad
+        input naming the command's key (the elements divide by the length: a traceback otherwise)."""
+        bad = np.flatnonzero(~(np.isfinite(lengths) & (lengths > 0.0)))
+        if bad.size:
+            i = int(bad[0])
+            name = self.model.actuators.names[i]
+            key = "commands" if i in set(self.model.program_index.tolist()) else f"members.{name}.actuator.command"
+            raise SceneError(f"{self.model.scene.source}:{key}",
+                             f"actuator '{name}' is commanded to {float(lengths[i]):.6g} m at t = {t:g} s; "
+                             "expected a positive, finite length (m)")
 
     def step(self, dt: float | None = None) -> StepResult:
         """Advance by ``dt`` (default: the scene's). Raises :class:`ConvergenceError` when the

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -37,13 +38,24 @@ def read_scene_text(path: str | Path, limits: Limits | None = None) -> str:
     path = Path(path)
     limits = limits or DEFAULT_LIMITS
     try:
-        size = path.stat().st_size
-        if size > limits.max_file_bytes:
-            raise over_limit(str(path), "scene file size in bytes", size, "max_file_bytes", limits)
-        data = path.read_bytes()
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode):
+            # a FIFO would block the read until a writer came, /dev/zero would fill the memory
+            raise SceneError(str(path), f"not a regular file ({_file_kind(mode)}); expected a scene file (YAML)")
+        with path.open("rb") as f:
+            # read one byte past the limit: a file that grew after stat() is refused all the same
+            data = f.read(limits.max_file_bytes + 1)
+        if len(data) > limits.max_file_bytes:
+            raise over_limit(str(path), "scene file size in bytes", path.stat().st_size, "max_file_bytes", limits)
     except OSError as exc:
         raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
     return strict_yaml.decode(data, str(path))
+
+
+def _file_kind(mode: int) -> str:
+    kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+             (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+    return next((name for test, name in kinds if test(mode)), "not a regular file")
 
 
 def load_scene(path: str | Path, overrides: dict[str, Any] | None = None, *,
@@ -149,10 +161,21 @@ def _passes_through(mem: Member, node: str) -> bool:
     return node in (mem.start, mem.end) or node in mem.via
 
 
+_MIN_RELATIVE_LENGTH = 1e-9     # a member's length at least this fraction of its nodes' coordinates
+_MIN_LENGTH = 1e-12             # m: and at least this
+
+
 def _check_member(n: Node, m: Member, nodes: dict) -> None:
     """A member's geometry: distinct end positions, an arc centre equidistant from both ends."""
-    if math.dist(nodes[m.start], nodes[m.end]) <= 0.0:
+    length = math.dist(nodes[m.start], nodes[m.end])
+    if length <= 0.0:
         raise n.fail(f"nodes '{m.start}' and '{m.end}' coincide: a member needs a positive length")
+    # shorter than this, the element's geometry is lost to rounding of the positions (or is below any
+    # physical length in SI): its tangent is singular, which a run would report without naming the key
+    floor = max(_MIN_RELATIVE_LENGTH * max(math.hypot(*nodes[m.start]), math.hypot(*nodes[m.end])), _MIN_LENGTH)
+    if length < floor:
+        raise n.fail(f"nodes '{m.start}' and '{m.end}' are {length:.3g} m apart; a member needs at least "
+                     f"{floor:.3g} m (1e-9 of its nodes' distance from the origin, 1e-12 m at least)")
     if m.arc_center is not None:
         r0, r1 = math.dist(m.arc_center, nodes[m.start]), math.dist(m.arc_center, nodes[m.end])
         if abs(r0 - r1) > 1e-9 * max(r0, r1):

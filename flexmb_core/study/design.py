@@ -24,9 +24,11 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import thousands
 from ..scene.overrides import OverrideError, split_key
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
+MAX_RUNS = 1_000_000         # runs of one sweep at most: each is a whole run (a table row, a file each)
 _NUMBER = re.compile(r"^\s*[-+]?(\d[\d_]*\.?\d*|\.\d+)([eE][-+]?\d+)?\s*$")
 _INTEGER = re.compile(r"^\s*[-+]?\d+\s*$")
 
@@ -147,6 +149,11 @@ def design(params: list[Param], *, samples: int | None = None, distribution: str
                             "give --samples N (Latin hypercube) or list the values a,b,c")
     if samples is not None and not ranges:
         raise OverrideError("--samples needs at least one range parameter KEY=LO:HI")
+    count = math.prod(len(p.values) for p in lists) * (samples if ranges else 1)
+    if count > MAX_RUNS:             # counted before a list of them is built (10⁹ combinations: gigabytes)
+        sizes = " × ".join([str(len(p.values)) for p in lists] + ([f"{samples} samples"] if ranges else []))
+        raise OverrideError(f"--param: {sizes} = {thousands(count)} runs; at most {thousands(MAX_RUNS)} "
+                            "(fewer values per list, or a Latin hypercube over ranges with --samples)")
     points = latin_hypercube(ranges, samples, distribution=distribution, seed=seed) if ranges else np.zeros((1, 0))
     runs = []
     for combo in itertools.product(*(p.values for p in lists)):

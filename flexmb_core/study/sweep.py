@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import FlexmbError, SceneError
+from ..errors import FlexmbError, SceneError, name_list
 from .cluster import connect, default_workers
 from .design import Param, design, parse_param
 from .runs import RunSpec, make_spec, run_one
@@ -82,13 +82,11 @@ def plan(scene_path: str | Path, param_items: list[str], *, samples: int | None 
     flexmb_core.scene.overrides.OverrideError
         A bad ``--param`` (syntax, a key whose parent the scene lacks, ranges without ``--samples``).
     """
-    from ..scene.loader import parse_yaml
+    from ..scene.loader import parse_yaml, read_scene_text
 
     path = Path(scene_path)
     try:
-        base = parse_yaml(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise SceneError(str(path), f"cannot read scene file ({exc.strerror})") from None
+        base = parse_yaml(read_scene_text(path), str(path))     # the size and file-type checks of load_scene
     except FlexmbError:
         raise
     except Exception as exc:  # noqa: BLE001 - yaml.YAMLError and kin
@@ -97,6 +95,13 @@ def plan(scene_path: str | Path, param_items: list[str], *, samples: int | None 
         raise SceneError(str(path), "expected a scene mapping at the top level")
     if every < 1:
         raise FlexmbError(f"--every must be a positive integer, got {every}")
+    declared = base.get("outputs")
+    if outputs and isinstance(declared, dict) and "include" not in base:
+        # a name no run can have is the flag's error, found before a run (each run would fail on it)
+        unknown = [o for o in outputs if o.split(".")[0] not in declared]
+        if unknown:
+            raise FlexmbError(f"--outputs {name_list(unknown)}: {path} declares no such output "
+                              f"(it declares {name_list(sorted(declared))})")
     params = [parse_param(p) for p in param_items]
     if not params:
         raise FlexmbError("flexmb sweep needs at least one --param KEY=VALUES")

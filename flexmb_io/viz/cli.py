@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from flexmb_core.cli import add_run_hook
-from flexmb_core.errors import FlexmbError
+from flexmb_core.errors import FlexmbError, writable_file
 
 from .hook import DEFAULT_PERIOD
 
@@ -51,11 +51,16 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.exaggerate != 1.0 and Path(args.recording).suffix == ".rrd":
         raise FlexmbError("--exaggerate applies to a bag or .mcap (an .rrd is shown as it was logged)")
     src = Path(args.recording)
+    if args.png:
+        writable_file(args.png, "--png", inputs=(src,))     # before the rendering: no work lost to a bad path
     layout = None
     temporary = False
+    empty = False
     if src.suffix == ".rrd":
         if not src.is_file():
             raise FlexmbError(f"{src}: no such .rrd file")
+        if src.stat().st_size == 0:
+            raise FlexmbError(f"{src}: an empty file; expected a rerun recording (.rrd)")
         rrd = src
     else:
         from .view import view_recording
@@ -69,6 +74,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         report = view_recording(src, rrd_path=str(rrd), period=args.period, exaggerate=args.exaggerate)
         layout = report.layout
         n = sum(report.messages.values())
+        empty = n == 0
         span = f"t = {report.t_first:.6g} … {report.t_last:.6g} s" if n else "no messages"
         print(f"{src}: logged {n} messages on {len(report.messages)} topics ({span})"
               + (f", scene '{report.scene}'" if report.scene else ", no scene attached (geometry from markers)")
@@ -78,7 +84,10 @@ def cmd_view(args: argparse.Namespace) -> int:
             print(f"wrote {rrd}")
     opened = False
     try:
-        if args.png:
+        if args.png and empty:
+            # the viewer would wait for data that never comes (up to the screenshot's timeout)
+            print(f"flexmb view: --png skipped: {src} holds no messages to draw", file=sys.stderr)
+        elif args.png:
             try:
                 print(f"wrote {screenshot(rrd, args.png, layout, size=args.window_size)}")
             except SnapshotUnavailable as exc:
@@ -107,6 +116,7 @@ def _make_hook(args, scene, model):
     if not getattr(args, "rrd", None):
         return None
     _require_rerun("flexmb run --rrd")
+    writable_file(args.rrd, "--rrd", inputs=(args.scene,))
     from .hook import make_hook
 
     return make_hook(args, scene, model)

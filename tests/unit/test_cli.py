@@ -247,6 +247,12 @@ def test_viewing_and_playing_flags_are_checked_up_front(tmp_path):
     _refused(["view", "bags/boom_step", "--png", str(tmp_path / "a.png"), "--window-size", "0x0"],
              "flexmb view: --window-size: expected WIDTHxHEIGHT in points (1 to 16384 each), e.g. 1600x900, got '0x0'",
              cli=FULL_CLI)
+    (tmp_path / "f").write_text("")         # a --png under a file: refused before the rendering
+    _refused(["view", "bags/boom_step", "--png", str(tmp_path / "f" / "a.png")],
+             f"flexmb view: --png {tmp_path / 'f' / 'a.png'}: cannot write there (File exists)", cli=FULL_CLI)
+    (tmp_path / "empty.rrd").write_bytes(b"")
+    _refused(["view", str(tmp_path / "empty.rrd"), "--png", str(tmp_path / "b.png")],
+             f"flexmb view: {tmp_path / 'empty.rrd'}: an empty file; expected a rerun recording (.rrd)", cli=FULL_CLI)
     table = tmp_path / "t.csv"
     table.write_text("0,1,1\n0.001,nan,1\n")
     _refused(["play", "--csv", str(table), "--names", "a,b"],
@@ -285,3 +291,54 @@ def test_every_flag_of_a_verb_is_in_its_readme_row(verb):
     text = "\n".join(rows)      # whole flags only: --record is not written by --record-rate
     missing = [f for f in _long_flags(_verbs()[verb]) if not re.search(re.escape(f) + r"(?![\w-])", text)]
     assert not missing, f"flexmb {verb}: flags missing from its README row: {missing}"
+
+
+def test_inputs_a_user_could_type_get_one_line_not_a_traceback(tmp_path):
+    """Cases a CLI fuzz found (session 25): each is bad input with a clear one-line answer, exit 1."""
+    scene = (ROOT / "scenes" / "actuator_arm.yaml").read_text()
+    zero = tmp_path / "zero.yaml"           # an actuator commanded to no length: the elements divide by it
+    zero.write_text(scene.replace("command: {kind: ramp, start: 1.0, end: 1.3, duration: 2.0, shape: cycloidal}",
+                                  "command: 0.0"))
+    _refused(["run", str(zero), "--until", "0.01", "--quiet"],
+             f"flexmb run: scene error: {zero}:members.lift.actuator.command: actuator 'lift' is commanded to 0 m "
+             "at t = 0 s; expected a positive, finite length (m)")
+    own = tmp_path / "own.yaml"             # an output path that is the input would overwrite the scene
+    own.write_text(scene)
+    _refused(["run", str(own), "--until", "0.01", "--quiet", "--json", str(own)],
+             f"flexmb run: --json {own}: is an input of this command; expected another path")
+    assert own.read_text() == scene
+    long_name = tmp_path / ("a" * 300 + ".json")     # a component past NAME_MAX: OSError from exists()
+    _refused(["run", str(own), "--until", "0.01", "--quiet", "--json", str(long_name)],
+             "cannot write there (File name too long)")
+    _refused(["commands", "stewart", "--out", str(tmp_path / "c.csv"), "--until", "1e308"],
+             "flexmb commands: --dt 0.001: inf rows over --until 1e+308 s; at most 10 000 000")
+    values = ",".join(str(2e11 + i) for i in range(1000))
+    _refused(["sweep", str(own), "--param", f"materials.steel.E={values}", f"materials.steel.rho={values}",
+              "materials.steel.nu=0.3,0.31", "--until", "0.01", "--out", str(tmp_path / "sweep"), "--quiet"],
+             "flexmb sweep: --param: 1000 × 1000 × 2 = 2 000 000 runs; at most 1 000 000")
+    _refused(["sweep", str(own), "--param", "materials.steel.E=2e11,2.1e11", "--outputs", "nope,arm_end",
+              "--until", "0.01", "--out", str(tmp_path / "sweep"), "--quiet"],
+             f"flexmb sweep: --outputs ['nope']: {own} declares no such output (it declares ['arm_end', 'arm_mid',")
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_summary_that_cannot_be_written_is_printed_instead():
+    p = _refused(["run", "scenes/actuator_arm.yaml", "--until", "0.01", "--quiet", "--json", "/dev/full"],
+                 "flexmb run: --json /dev/full: cannot write the summary (No space left on device)")
+    assert "lift_force" in p.stdout, p.stdout[-1500:]
+
+
+def test_an_initial_equilibrium_that_does_not_converge_exits_2_with_the_json(tmp_path):
+    """A mechanism (a base joint taken away) has no static equilibrium to start from: that is a step
+    that did not converge (exit 2, README), with the JSON written and completed false — not bad input."""
+    scene = tmp_path / "loose.yaml"
+    scene.write_text((ROOT / "scenes" / "stewart_platform_bars.yaml").read_text()
+                     .replace("  - {node: b1, type: ball}\n", ""))
+    out = tmp_path / "run.json"
+    p = subprocess.run(FLEXMB + ["run", str(scene), "--until", "0.01", "--quiet", "--json", str(out)],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert p.returncode == 2, p.stderr[-1500:]
+    assert "flexmb run: initial static equilibrium did not converge" in p.stderr and "Traceback" not in p.stderr
+    summary = json.loads(out.read_text())
+    assert summary["completed"] is False and summary["steps"] == 0
+    assert summary["error"].startswith("initial static equilibrium did not converge")

@@ -102,6 +102,20 @@ def test_yaml_file_errors_name_the_file(tmp_path):
         load_scene(p)
 
 
+@pytest.mark.timeout(30)
+def test_a_scene_path_that_is_no_regular_file_is_refused_unread(tmp_path):
+    """A FIFO would block the read until a writer came and /dev/zero would fill the memory: both are
+    refused from their file type, before any read, as is a directory."""
+    import os
+
+    fifo = tmp_path / "scene.yaml"
+    os.mkfifo(fifo)
+    for path, kind in ((fifo, "a FIFO"), (Path("/dev/zero"), "a character device"), (tmp_path, "a directory")):
+        with pytest.raises(SceneError) as info:
+            load_scene(path)
+        assert str(info.value) == f"{path}: not a regular file ({kind}); expected a scene file (YAML)"
+
+
 def test_exponent_floats_without_sign_are_numbers(tmp_path):
     """YAML 1.1 reads '200.0e9' as a string; scenes accept it as a number."""
     scene = load_scene(SCENES / "cantilever_b1.yaml")
