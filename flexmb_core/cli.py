@@ -575,9 +575,17 @@ def _one_line_warning(message, category, filename, lineno, line=None) -> str:
 
 
 def main(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> int:
-    _env_defaults()
+    previous = warnings.formatwarning
     if not os.environ.get("FLEXMB_DEBUG"):
         warnings.formatwarning = _one_line_warning
+    try:
+        return _main(argv, parser)
+    finally:
+        warnings.formatwarning = previous          # a caller in the same process keeps its own format
+
+
+def _main(argv: list[str] | None, parser: argparse.ArgumentParser | None) -> int:
+    _env_defaults()
     args = (parser or build_parser()).parse_args(argv)
     for name in ("until", "dt"):
         v = getattr(args, name, None)

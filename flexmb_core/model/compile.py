@@ -56,7 +56,7 @@ def compile_scene(scene: Scene, limits: Limits | None = None) -> Model:
     truss = _truss_group(blocks.truss, pattern)
     shell_groups = build_shell_groups(scene, dofs.shells, pattern.map, blocks.mass_rows, blocks.mass_cols,
                                       blocks.mass_vals)
-    _check_shell_outputs(scene, dofs)
+    _check_outputs(scene, dofs)
     mass = _mass(blocks, dofs, pattern)
     loads = _loads(scene, dofs, pattern, mass)
     program, program_index = _command_program(scene, act_lookup, actuators.l0)
@@ -369,12 +369,22 @@ def _truss_group(truss: dict[str, list], pattern: Pattern) -> TrussGroup | None:
     return group
 
 
-def _check_shell_outputs(scene: Scene, dofs: DofTable) -> None:
-    """A SceneError naming ``file:outputs.NAME.at`` for a shell-point output at no mesh node."""
+def _check_outputs(scene: Scene, dofs: DofTable) -> None:
+    """A SceneError naming ``file:outputs.NAME.at`` for a shell-point output at no mesh node, and
+    ``file:outputs.NAME.nodes`` for a platform pose whose three nodes span no triangle (its frame,
+    and the pose, would be NaN)."""
     for out in scene.outputs:
         if out.kind == "shell_point":
             shell_point_node(next(i for i in dofs.shells if i.name == out.shell), out.at,
                              f"{scene.source}:outputs.{out.name}.at", out.edge and out.edge[1])
+        elif out.kind == "platform_pose" and all(n in dofs.node_lookup for n in out.nodes):
+            p = np.array([dofs.q0_array[dofs.node_ydofs[dofs.node_lookup[n]]] for n in out.nodes])
+            area2 = float(np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0])))
+            span = max(float(np.linalg.norm(p[i] - p[j])) for i, j in ((0, 1), (0, 2), (1, 2)))
+            if not area2 > 1e-9 * span * span:
+                raise SceneError(f"{scene.source}:outputs.{out.name}.nodes",
+                                 f"nodes {list(out.nodes)} at {p.tolist()} m span no triangle (coincident or "
+                                 "collinear); expected three nodes of the platform that do")
 
 
 # -- sparsity ---------------------------------------------------------------------------------

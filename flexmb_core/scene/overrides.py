@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import FlexmbError
+from ..errors import FlexmbError, SceneError, excerpt
 
 
 class OverrideError(FlexmbError):
@@ -32,7 +32,12 @@ def parse_override(item: str, flag: str = "--override") -> tuple[list[str], Any]
     path = split_key(key)
     if not path:
         raise OverrideError(f"{flag} {item!r}: empty key")
-    return path, parse_yaml(raw)
+    try:
+        value = parse_yaml(raw, "VALUE")
+    except SceneError as exc:       # its place in a one-line value says nothing: the flag and item do
+        raise OverrideError(f"{flag} {excerpt(item, 80)}: the value is not valid YAML "
+                            f"({str(exc)[len(exc.where) + 2:]})") from None
+    return path, value
 
 
 def split_key(key: str) -> list[str]:

@@ -158,3 +158,18 @@ def test_section_properties_are_computed():
     area = g.w[0].sum() * 8                         # Σw = element volume A·L/8
     assert area == pytest.approx(math.pi * 0.005**2, rel=1e-12)
     assert model.total_mass == pytest.approx(7850 * math.pi * 0.005**2, rel=1e-12)
+
+
+@pytest.mark.parametrize("nodes", [["A", "A", "B"], ["A", "B", "A"]])
+def test_a_platform_pose_of_no_triangle_is_refused_naming_its_nodes(nodes):
+    """Coincident (or collinear) pose nodes give a NaN frame: the JSON of a run carried NaN poses."""
+    from flexmb_core.scene.loader import parse_yaml
+
+    path = SCENES / "stewart_platform_bars.yaml"
+    data = parse_yaml(path.read_text(), str(path))
+    data["outputs"]["platform"]["nodes"] = nodes
+    with pytest.raises(SceneError) as info:
+        compile_scene(scene_from_dict(data, source=str(path)))
+    assert str(info.value).startswith(f"{path}:outputs.platform.nodes: nodes {nodes} at [[")
+    assert str(info.value).endswith("m span no triangle (coincident or collinear); expected three nodes of the "
+                                    "platform that do")

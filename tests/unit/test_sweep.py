@@ -100,6 +100,9 @@ def test_an_edit_through_a_yaml_anchor_changes_only_the_named_entry():
     assert data["members"]["leg2"]["actuator"]["stroke"] == [0.65, 1.65]
     with pytest.raises(OverrideError, match=r"--override 'supports.9.type=ball': index 9 out of range \(list of 6\)"):
         apply_overrides(data, ["supports.9.type=ball"])
+    with pytest.raises(OverrideError) as exc:          # the flag and item, not the value's line and column
+        apply_overrides(data, ["materials.steel.E=[1,"])
+    assert str(exc.value).startswith("--override 'materials.steel.E=[1,': the value is not valid YAML (not valid YAML: ")
 
 
 # -- one run ---------------------------------------------------------------------------------------
