@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import thousands
+from ..errors import excerpt, thousands
 from ..scene.overrides import OverrideError, split_key
 
 DISTRIBUTIONS = ("uniform", "loguniform", "normal")
@@ -73,6 +73,11 @@ def parse_param(item: str, flag: str = "--param") -> Param:
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise OverrideError(f"{flag} {item!r}: a range needs finite bounds LO < HI, got {lo:g}:{hi:g}")
         return Param(key, tuple(path), low=lo, high=hi, integer=all(_INTEGER.match(p) for p in parts))
+    if ":" in raw and not any(c in raw for c in "[{,"):
+        # a bare LO:HI that is no range of two numbers was meant as one: as a YAML string it would
+        # become a single value, and `--samples` would then say that no range was given
+        raise OverrideError(f"{flag} {excerpt(item, 80)}: a range needs two numbers LO:HI "
+                            f"(e.g. 2.0e11:2.2e11), got {excerpt(raw, 40)}")
     values = tuple(parse_yaml(v) for v in split_values(raw))
     if not values or any(v is None for v in values):
         raise OverrideError(f"{flag} {item!r}: expected a value list a,b,c or a range LO:HI after '='")

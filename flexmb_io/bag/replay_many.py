@@ -91,9 +91,9 @@ def manifest_tolerances(root: Path) -> dict[str, dict]:
         When the manifest is not YAML or not ``bags: {NAME: {tolerances: {...}}}``.
     """
     path = Path(root) / MANIFEST
-    if not path.is_file():
+    if not path.exists():
         return {}
-    bags = manifest_bags(path)
+    bags = manifest_bags(path)        # not a file (a directory of that name): "cannot read the manifest"
     out = {}
     for name, entry in bags.items():
         entry = {} if entry is None else entry

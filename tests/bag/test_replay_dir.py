@@ -87,3 +87,7 @@ def test_empty_directory_bad_manifest_and_missing_bag(tmp_path, capsys):
     assert main(["replay", str(d), "--workers", "1"]) == 3
     text = capsys.readouterr().out
     assert "gone" in text and "listed in manifest.yaml, not found" in text and "REGRESSION in gone" in text
+    (d / "manifest.yaml").unlink()
+    (d / "manifest.yaml").mkdir()                  # unreadable: bad input, not a replay without tolerances
+    assert main(["replay", str(d), "--workers", "1"]) == 1
+    assert f"{d / 'manifest.yaml'}: cannot read the manifest" in capsys.readouterr().err

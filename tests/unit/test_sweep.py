@@ -85,6 +85,9 @@ def test_run_keys_are_stable_and_follow_the_effective_scene():
     (["materials.steel.E=2e11,3e11"], {"samples": 3}, "--samples needs at least one range parameter"),
     (["materials.titanium.E=1e11"], {}, "the scene has no key 'materials.titanium' (has ['steel'])"),
     (["materials.steel.E=1,2", "materials.steel.E=3"], {}, "given more than once"),
+    (["materials.steel.E=nan:2e11"], {"samples": 2}, "a range needs two numbers LO:HI (e.g. 2.0e11:2.2e11), "
+                                                     "got 'nan:2e11'"),
+    (["materials.steel.E=1:2:3"], {"samples": 2}, "a range needs two numbers LO:HI"),
 ])
 def test_bad_params_are_refused_before_any_run(items, kw, message):
     with pytest.raises(OverrideError) as exc:
