@@ -232,6 +232,12 @@ def parse(text: str, source: str = "<string>", limits: Limits | None = None) -> 
             raise SceneError(_at(source, mark), _DEEP) from None    # and stops at its own depth of 1000
         what = "; ".join(excerpt(s, 200) for s in (exc.context, exc.problem) if s)
         raise SceneError(_at(source, mark), f"not valid YAML: {what}") from None
+    except yaml.reader.ReaderError as exc:    # a control character: PyYAML's reader gives an offset only
+        line = text.count("\n", 0, exc.position) + 1
+        col = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
+        char = exc.character if isinstance(exc.character, int) else ord(str(exc.character)[:1] or "\0")
+        raise SceneError(f"{source}:{line}:{col}", f"not valid YAML: the control character U+{char:04X} is not "
+                                                   "allowed in YAML text") from None
     except yaml.YAMLError as exc:
         raise SceneError(source, f"not valid YAML: {excerpt(str(exc), 200)}") from None
     finally:

@@ -121,6 +121,8 @@ CASES = {
     "degenerate_up": (BASE.replace("section: rod}", "section: rod, up: [1.0, 0.0, 0.0]}"),
                       ":members.beam.up: 'up' [1.0, 0.0, 0.0] is parallel to the member axis"),
     "missing_file": (None, "cannot read scene file (No such file or directory)"),
+    "control_character": (BASE.replace("name: malformed", "name: mal\x00formed"),
+                          ":1:10: not valid YAML: the control character U+0000 is not allowed in YAML text"),
     "member_below_rounding": (BASE.replace("tip: [1.0, 0.0, 0.0]", "tip: [1.0, 1.0e-100, 0.0]")
                               .replace("root: [0.0, 0.0, 0.0]", "root: [1.0, 0.0, 0.0]"),
                               ":members.beam: nodes 'root' and 'tip' are 1e-100 m apart; a member needs at least "
