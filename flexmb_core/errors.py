@@ -131,14 +131,15 @@ def path_excerpt(path: Path) -> str:
 def writable_file(path, flag: str, inputs=()) -> Path:
     """``path`` (a file a command will write, e.g. ``--json``) once a file can be written there —
     its directory created, an existing file left as it is — or :class:`FlexmbError` naming
-    ``flag``; also when it is one of the command's ``inputs`` (paths it reads: a scene, a bag),
-    which writing would destroy. Called before the run, so that no work is lost to a bad output path."""
+    ``flag``; also when it is one of the command's ``inputs`` (paths it reads: a scene, a bag;
+    None where an optional input was not given), which writing would destroy. Called before the
+    run, so that no work is lost to a bad output path."""
     p = Path(path)
     try:
         if p.is_dir():
             raise FlexmbError(f"{flag} {path_excerpt(p)}: is a directory (expected the path of a file to write)")
         existed = p.exists()
-        if existed and any(Path(i).exists() and p.samefile(i) for i in inputs):
+        if existed and any(i and Path(i).exists() and p.samefile(i) for i in inputs):
             raise FlexmbError(f"{flag} {path_excerpt(p)}: is an input of this command; expected another path "
                               "(writing there would overwrite it)")
         p.parent.mkdir(parents=True, exist_ok=True)

@@ -235,9 +235,8 @@ def parse(text: str, source: str = "<string>", limits: Limits | None = None) -> 
     except yaml.reader.ReaderError as exc:    # a control character: PyYAML's reader gives an offset only
         line = text.count("\n", 0, exc.position) + 1
         col = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
-        char = exc.character if isinstance(exc.character, int) else ord(str(exc.character)[:1] or "\0")
-        raise SceneError(f"{source}:{line}:{col}", f"not valid YAML: the control character U+{char:04X} is not "
-                                                   "allowed in YAML text") from None
+        raise SceneError(f"{source}:{line}:{col}", f"not valid YAML: the control character "
+                                                   f"U+{exc.character:04X} is not allowed in YAML text") from None
     except yaml.YAMLError as exc:
         raise SceneError(source, f"not valid YAML: {excerpt(str(exc), 200)}") from None
     finally:

@@ -85,12 +85,7 @@ def plan(scene_path: str | Path, param_items: list[str], *, samples: int | None 
     from ..scene.loader import parse_yaml, read_scene_text
 
     path = Path(scene_path)
-    try:
-        base = parse_yaml(read_scene_text(path), str(path))     # the size and file-type checks of load_scene
-    except FlexmbError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - yaml.YAMLError and kin
-        raise SceneError(str(path), f"not valid YAML: {exc}") from None
+    base = parse_yaml(read_scene_text(path), str(path))     # SceneError naming the file (and line:column)
     if not isinstance(base, dict):
         raise SceneError(str(path), "expected a scene mapping at the top level")
     if every < 1:

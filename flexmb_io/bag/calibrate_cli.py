@@ -107,7 +107,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise CalibrationError(f"--max-evaluations must be a positive integer, got {args.max_evaluations}")
     out = writable_dir(args.out, "--out")       # before the fit: no work lost to a bad path
     if args.json:
-        writable_file(args.json, "--json", inputs=(args.bag, args.scene or args.bag))
+        writable_file(args.json, "--json", inputs=(args.bag, args.scene))
     noise = _noise(_flatten(args.noise))
     overrides = _flatten(args.override)
     outputs = [x for x in (args.outputs or "").split(",") if x] or None

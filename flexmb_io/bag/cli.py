@@ -56,7 +56,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from .replay_many import is_bag_dir
 
     if args.json:
-        writable_file(args.json, "--json", inputs=(args.bag, args.scene or args.bag))   # before the replay
+        writable_file(args.json, "--json", inputs=(args.bag, args.scene))   # before the replay
     if Path(args.bag).is_dir() and not is_bag_dir(Path(args.bag)):
         return _replay_dir(args)
 
